@@ -1,0 +1,53 @@
+"""Warp initialisation and device selection, shared by every module."""
+
+from __future__ import annotations
+
+import os
+
+import warp as wp
+
+__all__ = ["init", "resolve_device"]
+
+_initialised = False
+
+
+def init() -> None:
+    """Initialise Warp once, quietly, honouring ``WARP_CACHE_PATH``."""
+    global _initialised
+    if _initialised:
+        return
+    cache = os.environ.get("WARP_CACHE_PATH")
+    if cache:
+        wp.config.kernel_cache_dir = cache
+    wp.config.quiet = True
+    wp.init()
+    _initialised = True
+
+
+def resolve_device(device: str | wp.Device | None) -> wp.Device:
+    """Return the Warp device to run on.
+
+    Args:
+        device: A Warp device or its name (``"cpu"``, ``"cuda"``, ``"cuda:0"``); ``None`` means
+            CUDA when Warp sees a GPU, else the CPU.
+
+    Raises:
+        SceneError: If the named device does not exist here.
+    """
+    from .errors import SceneError
+
+    init()
+    if device is None:
+        return wp.get_device("cuda") if wp.is_cuda_available() else wp.get_device("cpu")
+    if isinstance(device, wp.Device):
+        return device
+    name = str(device)
+    if name.startswith("cuda") and not wp.is_cuda_available():
+        raise SceneError(
+            f"device: {name!r} was asked for but Warp sees no CUDA GPU here; use 'cpu'"
+        )
+    try:
+        return wp.get_device(name)
+    except Exception:
+        names = ", ".join(d.alias for d in wp.get_devices())
+        raise SceneError(f"device: unknown device {name!r}; available: {names}") from None

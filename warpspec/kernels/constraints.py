@@ -1,0 +1,238 @@
+"""Constraint fields: the Gaussian point attraction, the extended normal field and the start.
+
+- ``G(x) = sum_y exp(-|x - y|^2 / (2 eps^2))`` is splatted point by point over the nodes within
+  ``cutoff * eps`` of each point (``exp(-cutoff^2 / 2)`` is dropped beyond), so its cost grows
+  with the number of points times a small window, never points times voxels.
+- The extended normal field ``V`` is held as an ``owner`` index per node: two passes over the
+  nodes within ``r_N`` of each ray's intersection pick the nearest intersection with atomic
+  minima, first on the distance, then on the ray index among equal distances, so the result
+  does not depend on thread order.
+"""
+
+from __future__ import annotations
+
+import math
+
+import warp as wp
+
+from .differences import central_gradient
+
+wp.set_module_options({"enable_backward": False})
+
+__all__ = [
+    "GAUSSIAN_CUTOFF",
+    "NO_OWNER",
+    "launch_bend",
+    "launch_claim_normals",
+    "launch_gaussian",
+    "launch_plane",
+    "window_span",
+]
+
+GAUSSIAN_CUTOFF = 5.0
+NO_OWNER = 2**30
+
+
+@wp.func
+def node_position(origin: wp.vec3, h: float, i: int, j: int, k: int) -> wp.vec3:
+    """World position of node ``(i, j, k)``."""
+    return origin + h * wp.vec3(float(i), float(j), float(k))
+
+
+@wp.func
+def window_node(
+    centre: wp.vec3, origin: wp.vec3, h: float, radius: float, span: int, offset: int
+) -> wp.vec3i:
+    """Node number ``offset`` of the cube of ``span^3`` nodes covering a ball around ``centre``."""
+    q = (centre - origin) / h
+    lo_i = int(wp.floor(q[0] - radius))
+    lo_j = int(wp.floor(q[1] - radius))
+    lo_k = int(wp.floor(q[2] - radius))
+    a = offset // (span * span)
+    b = (offset // span) % span
+    c = offset % span
+    return wp.vec3i(lo_i + a, lo_j + b, lo_k + c)
+
+
+@wp.func
+def inside(shape: wp.vec3i, n: wp.vec3i) -> bool:
+    """Whether a node index lies on the grid."""
+    return (
+        n[0] >= 0 and n[1] >= 0 and n[2] >= 0
+        and n[0] < shape[0] and n[1] < shape[1] and n[2] < shape[2]
+    )
+
+
+@wp.kernel
+def gaussian_splat(
+    points: wp.array[wp.vec3],
+    origin: wp.vec3,
+    h: float,
+    eps: float,
+    cutoff: float,
+    span: int,
+    gauss: wp.array3d[float],
+):
+    """Add each point's Gaussian to the nodes within ``cutoff * eps`` of it."""
+    p, offset = wp.tid()
+    y = points[p]
+    n = window_node(y, origin, h, cutoff * eps / h, span, offset)
+    shape = wp.vec3i(gauss.shape[0], gauss.shape[1], gauss.shape[2])
+    if not inside(shape, n):
+        return
+    d = node_position(origin, h, n[0], n[1], n[2]) - y
+    r2 = wp.dot(d, d)
+    if r2 <= (cutoff * eps) * (cutoff * eps):
+        wp.atomic_add(gauss, n[0], n[1], n[2], wp.exp(-r2 / (2.0 * eps * eps)))
+
+
+@wp.kernel
+def claim_distance(
+    hits: wp.array[wp.vec3],
+    active: wp.array[int],
+    origin: wp.vec3,
+    h: float,
+    radius: float,
+    span: int,
+    dist: wp.array3d[float],
+):
+    """First pass of the nearest-intersection rule: the smallest distance per node."""
+    r, offset = wp.tid()
+    if active[r] == 0:
+        return
+    x = hits[r]
+    n = window_node(x, origin, h, radius / h, span, offset)
+    shape = wp.vec3i(dist.shape[0], dist.shape[1], dist.shape[2])
+    if not inside(shape, n):
+        return
+    d = wp.length(node_position(origin, h, n[0], n[1], n[2]) - x)
+    if d <= radius:
+        wp.atomic_min(dist, n[0], n[1], n[2], d)
+
+
+@wp.kernel
+def claim_owner(
+    hits: wp.array[wp.vec3],
+    active: wp.array[int],
+    origin: wp.vec3,
+    h: float,
+    radius: float,
+    span: int,
+    dist: wp.array3d[float],
+    owner: wp.array3d[int],
+):
+    """Second pass: among the rays at the smallest distance, the lowest index owns the node."""
+    r, offset = wp.tid()
+    if active[r] == 0:
+        return
+    x = hits[r]
+    n = window_node(x, origin, h, radius / h, span, offset)
+    shape = wp.vec3i(dist.shape[0], dist.shape[1], dist.shape[2])
+    if not inside(shape, n):
+        return
+    d = wp.length(node_position(origin, h, n[0], n[1], n[2]) - x)
+    if d <= radius and d == dist[n[0], n[1], n[2]]:
+        wp.atomic_min(owner, n[0], n[1], n[2], r)
+
+
+@wp.kernel
+def plane_field(
+    origin: wp.vec3, h: float, point: wp.vec3, normal: wp.vec3, phi: wp.array3d[float]
+):
+    """Signed distance to the plane through ``point`` with unit ``normal`` (positive side)."""
+    i, j, k = wp.tid()
+    phi[i, j, k] = wp.dot(node_position(origin, h, i, j, k) - point, normal)
+
+
+@wp.kernel
+def bend_field(
+    phi: wp.array3d[float], dist: wp.array3d[float], h: float, c: float,
+    out: wp.array3d[float],
+):
+    """``phi - c * d * |grad phi|`` (paper eq. 23): keeps the zero set on the points."""
+    i, j, k = wp.tid()
+    g = wp.length(central_gradient(phi, i, j, k, 0.5 / h))
+    out[i, j, k] = phi[i, j, k] - c * dist[i, j, k] * g
+
+
+def window_span(radius_in_cells: float) -> int:
+    """Nodes per axis of the cube that covers a ball of the given radius (in cells)."""
+    return 2 * int(math.ceil(radius_in_cells)) + 2
+
+
+def launch_gaussian(
+    points: wp.array,
+    gauss: wp.array,
+    *,
+    origin: tuple[float, float, float],
+    spacing: float,
+    eps: float,
+    cutoff: float = GAUSSIAN_CUTOFF,
+) -> None:
+    """Fill ``gauss`` with ``G(x) = sum_y exp(-|x - y|^2 / (2 eps^2))`` (zeroes it first).
+
+    Args:
+        points: Point constraints (vec3).
+        gauss: Destination field (float32, 3-D).
+        origin: World position of node ``(0, 0, 0)``.
+        spacing: Grid spacing ``h``.
+        eps: Standard deviation of each Gaussian, world units.
+        cutoff: Contributions beyond ``cutoff * eps`` are dropped.
+    """
+    gauss.zero_()
+    if points.shape[0] == 0:
+        return
+    span = window_span(cutoff * eps / spacing)
+    wp.launch(
+        gaussian_splat,
+        dim=(points.shape[0], span**3),
+        inputs=[points, wp.vec3(*origin), float(spacing), float(eps), float(cutoff), span],
+        outputs=[gauss],
+        device=gauss.device,
+    )
+
+
+def launch_claim_normals(
+    hits: wp.array,
+    active: wp.array,
+    dist: wp.array,
+    owner: wp.array,
+    *,
+    origin: tuple[float, float, float],
+    spacing: float,
+    radius: float,
+) -> None:
+    """Rebuild ``owner``: each node within ``radius`` of an active hit takes the nearest ray.
+
+    ``dist`` is scratch. Nodes owned by no ray get :data:`NO_OWNER`.
+    """
+    dist.fill_(1.0e30)
+    owner.fill_(NO_OWNER)
+    if hits.shape[0] == 0:
+        return
+    span = window_span(radius / spacing)
+    args = [hits, active, wp.vec3(*origin), float(spacing), float(radius), span, dist]
+    dim = (hits.shape[0], span**3)
+    wp.launch(claim_distance, dim=dim, inputs=args, device=dist.device)
+    wp.launch(claim_owner, dim=dim, inputs=args, outputs=[owner], device=dist.device)
+
+
+def launch_plane(
+    phi: wp.array,
+    *,
+    origin: tuple[float, float, float],
+    spacing: float,
+    point: tuple[float, float, float],
+    normal: tuple[float, float, float],
+) -> None:
+    """Fill ``phi`` with the signed distance to a plane (``normal`` must be unit length)."""
+    wp.launch(plane_field, dim=phi.shape, inputs=[wp.vec3(*origin), float(spacing),
+              wp.vec3(*point), wp.vec3(*normal)], outputs=[phi], device=phi.device)
+
+
+def launch_bend(
+    phi: wp.array, dist: wp.array, out: wp.array, *, spacing: float, c: float
+) -> None:
+    """Write ``phi - c * d * |grad phi|`` into ``out`` (a positive ``c`` moves toward phi > 0)."""
+    wp.launch(bend_field, dim=phi.shape, inputs=[phi, dist, float(spacing), float(c)],
+              outputs=[out], device=phi.device)
