@@ -20,6 +20,7 @@ def init() -> None:
     if cache:
         wp.config.kernel_cache_dir = cache
     wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING  # no start-up banner, no per-module load lines
     wp.init()
     _initialised = True
 

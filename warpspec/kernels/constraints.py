@@ -25,6 +25,7 @@ __all__ = [
     "launch_bend",
     "launch_claim_normals",
     "launch_gaussian",
+    "launch_height_field",
     "launch_plane",
     "window_span",
 ]
@@ -153,6 +154,65 @@ def bend_field(
     i, j, k = wp.tid()
     g = wp.length(central_gradient(phi, i, j, k, 0.5 / h))
     out[i, j, k] = phi[i, j, k] - c * dist[i, j, k] * g
+
+
+@wp.kernel
+def height_field(
+    origin: wp.vec3,
+    h: float,
+    point: wp.vec3,
+    axis_u: wp.vec3,
+    axis_v: wp.vec3,
+    normal: wp.vec3,
+    scale: float,
+    coeffs: wp.array[float],
+    powers: wp.array[wp.vec2i],
+    phi: wp.array3d[float],
+):
+    """Signed distance (to first order) to the height field ``w = z(u, v)`` over a plane.
+
+    ``z = scale * sum_m coeffs[m] (u/scale)^a_m (v/scale)^b_m`` in the plane's frame; the value
+    is ``(w - z) / sqrt(1 + |grad z|^2)``, positive on the ``normal`` side.
+    """
+    i, j, k = wp.tid()
+    d = node_position(origin, h, i, j, k) - point
+    u = wp.dot(d, axis_u) / scale
+    v = wp.dot(d, axis_v) / scale
+    w = wp.dot(d, normal)
+    z = 0.0
+    zu = 0.0
+    zv = 0.0
+    for m in range(coeffs.shape[0]):
+        a = powers[m][0]
+        b = powers[m][1]
+        c = coeffs[m]
+        z += c * wp.pow(u, float(a)) * wp.pow(v, float(b))
+        if a > 0:
+            zu += c * float(a) * wp.pow(u, float(a - 1)) * wp.pow(v, float(b))
+        if b > 0:
+            zv += c * float(b) * wp.pow(u, float(a)) * wp.pow(v, float(b - 1))
+    phi[i, j, k] = (w - scale * z) / wp.sqrt(1.0 + zu * zu + zv * zv)
+
+
+def launch_height_field(
+    phi: wp.array,
+    coeffs: wp.array,
+    powers: wp.array,
+    *,
+    origin: tuple[float, float, float],
+    spacing: float,
+    point: tuple[float, float, float],
+    axes: tuple[tuple[float, float, float], ...],
+    scale: float,
+) -> None:
+    """Fill ``phi`` with the height field ``z(u, v)`` over the plane ``(point, axes)``.
+
+    ``axes`` holds the plane's two in-plane unit axes and its unit normal.
+    """
+    wp.launch(height_field, dim=phi.shape,
+              inputs=[wp.vec3(*origin), float(spacing), wp.vec3(*point), wp.vec3(*axes[0]),
+                      wp.vec3(*axes[1]), wp.vec3(*axes[2]), float(scale), coeffs, powers],
+              outputs=[phi], device=phi.device)
 
 
 def window_span(radius_in_cells: float) -> int:

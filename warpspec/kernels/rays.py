@@ -34,10 +34,9 @@ MEASURE_SLOTS = {
     "point_abs_sum": 3,
     "energy_normal": 4,
     "energy_smooth": 5,
-    "energy_point": 6,
-    "nonfinite": 7,
+    "nonfinite": 6,
 }
-NUM_SLOTS = 8
+NUM_SLOTS = 7
 
 
 @wp.func
@@ -211,24 +210,19 @@ def measure_grid(
     phi: wp.array3d[float],
     owner: wp.array3d[int],
     normals: wp.array[wp.vec3],
-    gauss: wp.array3d[float],
     h: float,
-    point_weight: float,
     sums: wp.array[wp.float64],
 ):
-    """Grid integrals: ``E_N``, surface area and ``w_P * integral |phi| G``; non-finite count.
+    """Grid integrals: ``E_N`` and the surface area; the count of non-finite values.
 
     Surface integrals use the smeared delta ``(1 + cos(pi phi / w)) / (2 w)``, ``w = 1.5 h``.
     """
     i, j, k = wp.tid()
     c = phi[i, j, k]
     if not wp.isfinite(c):
-        wp.atomic_add(sums, 7, wp.float64(1.0))
+        wp.atomic_add(sums, 6, wp.float64(1.0))
         return
     cell = h * h * h
-    g = gauss[i, j, k]
-    if point_weight != 0.0 and g > 0.0:
-        wp.atomic_add(sums, 6, wp.float64(point_weight * wp.abs(c) * g * cell))
     width = 1.5 * h
     if wp.abs(c) >= width:
         return
@@ -285,7 +279,6 @@ def launch_measures(
     phi: wp.array,
     owner: wp.array,
     normals: wp.array,
-    gauss: wp.array,
     hits: wp.array,
     active: wp.array,
     points: wp.array,
@@ -293,7 +286,6 @@ def launch_measures(
     *,
     origin: tuple[float, float, float],
     spacing: float,
-    point_weight: float,
 ) -> None:
     """Zero ``sums`` (float64, :data:`MEASURE_SLOTS`) and accumulate every measure into it."""
     sums.zero_()
@@ -305,5 +297,5 @@ def launch_measures(
     if points.shape[0] > 0:
         wp.launch(measure_points, dim=points.shape[0], inputs=[phi, o, h, points],
                   outputs=[sums], device=phi.device)
-    wp.launch(measure_grid, dim=phi.shape, inputs=[phi, owner, normals, gauss, h,
-              float(point_weight)], outputs=[sums], device=phi.device)
+    wp.launch(measure_grid, dim=phi.shape, inputs=[phi, owner, normals, h], outputs=[sums],
+              device=phi.device)

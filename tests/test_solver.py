@@ -1,0 +1,159 @@
+"""The solver end to end, and the paper's theory checked numerically."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import warpspec as ws
+from warpspec.evaluate import hull_region
+from warpspec.mesh import sample_trilinear
+
+OCTANT = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "octant.json"
+
+
+@pytest.fixture(scope="module")
+def octant():
+    return ws.Scene.load(OCTANT)
+
+
+def true_hits(scene):
+    """Where each specular ray meets the unit sphere (first intersection)."""
+    o, d = scene.rays()
+    b = np.einsum("ij,ij->i", o, d)
+    t = -b - np.sqrt(b * b - (np.einsum("ij,ij->i", o, o) - 1.0))
+    return o + t[:, None] * d
+
+
+def test_point_term_alone_never_increases_point_energy(octant, device):
+    solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, fit_iterations=0,
+                              reinit_every=0, point_weight=1.0, device=device)
+    energies = [solver.measures()["energy_point"]]
+    for _ in range(30):
+        solver.step(normal=False, smooth=False, points=True)
+        energies.append(solver.measures()["energy_point"])
+    e = np.array(energies)
+    assert e[0] > 0
+    assert np.all(np.diff(e) <= 1e-12 * e[0])
+    assert e[-1] < 0.5 * e[0]
+
+
+def test_normal_term_alone_never_increases_normal_energy(octant, device):
+    # The bent plane, with its normals off by ~0.08 (1 - N.n): the normal term must lower E_N
+    # at every step while the intersections stay fixed.
+    solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, fit_iterations=0,
+                              reinit_every=0, device=device)
+    energies = [solver.measures()["energy_normal"]]
+    for _ in range(40):
+        solver.step(normal=True, smooth=False, points=False, intersect=False)
+        energies.append(solver.measures(intersect=False)["energy_normal"])
+    e = np.array(energies)
+    assert np.all(np.diff(e) <= 1e-6 * e[0]), np.diff(e).max()
+    assert e[-1] < 0.5 * e[0]
+
+
+def test_full_run_lowers_total_energy(octant, device):
+    solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, fit_iterations=0,
+                              device=device)
+    history = solver.run(100, measure_every=0)
+    first, last = history[0], history[-1]
+    # Most of the total is alpha * area, which an octant cannot shed; the total must fall by
+    # most of what the constraints add to it.
+    reducible = first["energy_normal"] + first["energy_point"]
+    assert first["energy_total"] - last["energy_total"] > 0.6 * reducible
+    assert last["energy_normal"] < 0.1 * first["energy_normal"]
+    assert last["normal_error"] < 0.1 * first["normal_error"]
+
+
+@pytest.mark.slow
+def test_octant_end_to_end_meets_the_papers_figures(octant):
+    solver = ws.Reconstructor(octant, resolution=64, alpha=0.01, bulge=0.5,
+                              gaussian_width=1.0, device="cpu")
+    solver.run(300, measure_every=10)
+    result = solver.result()
+    last = result.history[-1]
+    assert last["iteration"] == 300  # 300 is a multiple of reinit_every: just reinitialised
+    assert last["normal_error"] <= 0.005
+    assert last["point_error"] <= 0.1
+    assert last["misses"] == 0
+    h = result.grid.spacing
+    region = hull_region(np.vstack([true_hits(octant), octant.points]))
+    v = result.mesh.vertices
+    inside = region.contains(v)
+    assert inside.sum() > 1000
+    error = np.abs(np.linalg.norm(v[inside], axis=1) - 1.0) / h
+    assert error.mean() <= 0.5
+    assert result.mesh.volume > 0 or result.mesh.is_watertight is False
+    # The faces point outward: toward the cameras, away from the sphere's centre.
+    centres = result.mesh.triangles_center[region.contains(result.mesh.triangles_center)]
+    normals = result.mesh.face_normals[region.contains(result.mesh.triangles_center)]
+    assert np.mean(np.einsum("ij,ij->i", centres, normals) > 0) > 0.99
+
+
+def test_mesh_of_a_sphere_faces_outward(device):
+    grid = ws.Grid.from_bounds(np.full(3, -1.0), np.full(3, 1.0), resolution=32)
+    x, y, z = grid.coordinates()
+    phi = np.sqrt(x * x + y * y + z * z) - 0.6
+    from warpspec.mesh import extract_mesh
+
+    mesh = extract_mesh(phi, grid)
+    assert mesh.volume == pytest.approx(4 / 3 * np.pi * 0.6**3, rel=0.02)
+    assert np.allclose(np.linalg.norm(mesh.vertices, axis=1), 0.6, atol=0.01)
+
+
+def test_reinitialisation_keeps_points_on_the_surface(octant):
+    solver = ws.Reconstructor(octant, resolution=32, device="cpu")
+    h = solver.grid.spacing
+    before = sample_trilinear(solver.phi.numpy(), solver.grid, octant.points)
+    solver.reinitialize()
+    after = sample_trilinear(solver.phi.numpy(), solver.grid, octant.points)
+    assert np.all(np.abs(after - before) < 0.05 * h)
+
+
+def test_reconstruct_accepts_a_path_and_leaves_the_scene_alone(octant, tmp_path):
+    data = json.loads(OCTANT.read_text())
+    path = tmp_path / "octant.json"
+    path.write_text(json.dumps(data))
+    result = ws.reconstruct(path, iterations=5, resolution=20, device="cpu")
+    assert len(result.mesh.faces) > 0
+    assert json.loads(path.read_text()) == data
+    points = octant.points.copy()
+    ws.reconstruct(octant, iterations=2, resolution=16, device="cpu")
+    np.testing.assert_array_equal(octant.points, points)
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "field"),
+    [
+        ("resolution", 0, "resolution"),
+        ("resolution", 2.5, "resolution"),
+        ("resolution", "64", "resolution"),
+        ("alpha", -1.0, "alpha"),
+        ("alpha", float("nan"), "alpha"),
+        ("bulge_cap", 0.0, "bulge_cap"),
+        ("reinit_every", -1, "reinit_every"),
+        ("cfl", 1.5, "cfl"),
+        ("gaussian_width", 0.0, "gaussian_width"),
+        ("device", "cuda:7", "device"),
+        ("device", "tpu", "device"),
+        ("iterations", 0, "iterations"),
+        ("iterations", True, "iterations"),
+    ],
+)
+def test_bad_options_name_the_field(octant, option, value, field):
+    options = {"resolution": 16, "iterations": 1, option: value}
+    with pytest.raises(ws.SceneError, match=f"^{field}:"):
+        ws.reconstruct(octant, **options)
+
+
+def test_a_grid_too_large_for_memory_is_refused_before_allocating(octant):
+    with pytest.raises(ws.SceneError, match=r"resolution: .* needs about .* GiB"):
+        ws.Reconstructor(octant, resolution=20000, device="cpu")
+
+
+def test_a_run_that_loses_its_surface_says_so(octant):
+    solver = ws.Reconstructor(octant, resolution=16, device="cpu")
+    solver.phi.fill_(1.0)
+    with pytest.raises(ws.ReconstructionError, match="no surface"):
+        solver.result()

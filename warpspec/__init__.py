@@ -1,0 +1,29 @@
+"""warpspec: shape from specularities with sparse data, as a level-set solver in NVIDIA Warp.
+
+The method is the variational level-set flow of Solem, Aanaes and Heyden (3DPVT 2004): the
+smoothest surface through a few known points whose normals, where the specular rays meet it,
+obey the law of reflection.
+"""
+
+from .errors import ReconstructionError, SceneError
+from .grid import Grid
+from .redistance import point_distance, redistance
+from .scene import Light, Scene, SceneWarning
+from .solver import Reconstructor, Result, reconstruct
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Grid",
+    "Light",
+    "ReconstructionError",
+    "Reconstructor",
+    "Result",
+    "Scene",
+    "SceneError",
+    "SceneWarning",
+    "__version__",
+    "point_distance",
+    "reconstruct",
+    "redistance",
+]

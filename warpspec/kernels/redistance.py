@@ -1,0 +1,619 @@
+"""Reinitialisation of a level set by fast sweeping, and distance to a point set (DESIGN 6).
+
+Distances are computed in index units (``h = 1``) in a scratch array and scaled by the spacing
+only when written back, so the sweeps never see the spacing. Two ways to run the sweeps share
+one Godunov update:
+
+- ``serial``: one thread does the 8 Gauss-Seidel sweeps of Zhao (2005) in order; the fastest on
+  the CPU backend, which runs a launch serially anyway.
+- ``planes``: the parallel sweeps of Detrixhe, Gibou and Min (2013): for each of the 8
+  orderings, one launch per plane ``i' + j' + k' = L`` of the ordering's flipped coordinates.
+  A node's Godunov update reads only its 6 axis neighbours; the 3 upwind ones lie on plane
+  ``L - 1`` (already swept) and the 3 downwind ones on plane ``L + 1`` (not yet swept), exactly
+  as in the serial lexicographic order, so both methods give the same numbers.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+__all__ = ["BAND_MODES", "METHODS", "Redistancer"]
+
+BIG = wp.constant(1.0e30)
+"""Start value of the nodes that the sweeps have not reached (finite: no inf in the output)."""
+
+BAND_MODES = {"axis": 0, "gradient": 1}
+"""Band initialisations accepted by :class:`Redistancer` and their kernel codes."""
+
+METHODS = ("auto", "serial", "planes")
+"""Sweep methods accepted by :class:`Redistancer`."""
+
+# flags per node: bit 0 inside (phi < 0); bit 1 frozen (a band node, kept by the sweeps);
+# bit 2 active (a neighbour changed since the node was last updated: the "locking" of Bak,
+# McLaughlin and Renzi 2010, which skips the nodes that cannot change)
+_INSIDE = wp.constant(1)
+_FROZEN = wp.constant(2)
+_ACTIVE = wp.constant(4)
+
+
+@wp.func
+def _crossing(p0: float, p1: float) -> float:
+    """Distance in index units from a node (p0) to the zero crossing on the edge to p1, or BIG."""
+    if (p0 < 0.0) != (p1 < 0.0):
+        return p0 / (p0 - p1)
+    return BIG
+
+
+@wp.struct
+class PointSet:
+    """A point set for the distance sweeps, and the nearest known point of every node."""
+
+    points: wp.array[wp.vec3]
+    """World positions."""
+    origin: wp.vec3
+    """World position of node (0, 0, 0)."""
+    inv_h: float
+    """1 / spacing."""
+    nearest: wp.array3d[wp.int32]
+    """Index of the nearest known point per node, -1 for none."""
+
+
+@wp.func
+def _point_distance(pts: PointSet, q: int, g: wp.vec3) -> float:
+    """Distance (index units) from grid position g to point q, or BIG for q < 0."""
+    if q < 0:
+        return BIG
+    return wp.length((pts.points[q] - pts.origin) * pts.inv_h - g)
+
+
+@wp.func
+def _godunov(d: wp.array3d[float], i: int, j: int, k: int) -> float:
+    """Godunov upwind solution of |grad d| = 1 (h = 1) from the 6 axis neighbours (clamped)."""
+    nx = d.shape[0]
+    ny = d.shape[1]
+    nz = d.shape[2]
+    a = wp.min(d[wp.max(i - 1, 0), j, k], d[wp.min(i + 1, nx - 1), j, k])
+    b = wp.min(d[i, wp.max(j - 1, 0), k], d[i, wp.min(j + 1, ny - 1), k])
+    c = wp.min(d[i, j, wp.max(k - 1, 0)], d[i, j, wp.min(k + 1, nz - 1)])
+    # sort a <= b <= c
+    if a > b:
+        t = a
+        a = b
+        b = t
+    if b > c:
+        t = b
+        b = c
+        c = t
+    if a > b:
+        t = a
+        a = b
+        b = t
+    # solve relative to the smallest value: float32 keeps its precision far from the surface
+    u = 1.0
+    b = b - a
+    if u > b:
+        u = 0.5 * (b + wp.sqrt(2.0 - b * b))
+        c = c - a
+        if u > c:
+            s = b + c
+            u = (s + wp.sqrt(wp.max(s * s - 3.0 * (b * b + c * c - 1.0), 0.0))) / 3.0
+    return a + u
+
+
+@wp.func
+def _nearest_update(pts: PointSet, i: int, j: int, k: int) -> bool:
+    """Take the nearest point among this node's and its 6 neighbours' nearest points."""
+    nx = pts.nearest.shape[0]
+    ny = pts.nearest.shape[1]
+    nz = pts.nearest.shape[2]
+    g = wp.vec3(float(i), float(j), float(k))
+    old = pts.nearest[i, j, k]
+    best = old
+    bd = _point_distance(pts, old, g)
+    q = pts.nearest[wp.max(i - 1, 0), j, k]
+    dq = _point_distance(pts, q, g)
+    if dq < bd:
+        bd = dq
+        best = q
+    q = pts.nearest[wp.min(i + 1, nx - 1), j, k]
+    dq = _point_distance(pts, q, g)
+    if dq < bd:
+        bd = dq
+        best = q
+    q = pts.nearest[i, wp.max(j - 1, 0), k]
+    dq = _point_distance(pts, q, g)
+    if dq < bd:
+        bd = dq
+        best = q
+    q = pts.nearest[i, wp.min(j + 1, ny - 1), k]
+    dq = _point_distance(pts, q, g)
+    if dq < bd:
+        bd = dq
+        best = q
+    q = pts.nearest[i, j, wp.max(k - 1, 0)]
+    dq = _point_distance(pts, q, g)
+    if dq < bd:
+        bd = dq
+        best = q
+    q = pts.nearest[i, j, wp.min(k + 1, nz - 1)]
+    dq = _point_distance(pts, q, g)
+    if dq < bd:
+        bd = dq
+        best = q
+    if best != old:
+        pts.nearest[i, j, k] = best
+        return True
+    return False
+
+
+@wp.func
+def _mark(flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
+    """Mark one node active (the flag byte is only ever or-ed with the same bit meanwhile)."""
+    flags[i, j, k] = flags[i, j, k] | wp.uint8(_ACTIVE)
+
+
+@wp.func
+def _visit(
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    pts: PointSet,
+    mode: int,
+    i: int,
+    j: int,
+    k: int,
+):
+    """Update an active, unfrozen node and wake its neighbours if it changed.
+
+    Mode 0: Godunov update of the distance ``d``; mode 1: nearest point of ``pts``. Reads the
+    node's 6 axis neighbours and writes only the node and its neighbours' active bits.
+    """
+    f = int(flags[i, j, k])
+    if (f & (_ACTIVE + _FROZEN)) != _ACTIVE:
+        return
+    flags[i, j, k] = wp.uint8(f - _ACTIVE)
+    changed = wp.bool(False)
+    if mode == 0:
+        u = _godunov(d, i, j, k)
+        if u < d[i, j, k]:
+            d[i, j, k] = u
+            changed = True
+    else:
+        changed = _nearest_update(pts, i, j, k)
+    if changed:
+        if i > 0:
+            _mark(flags, i - 1, j, k)
+        if i < flags.shape[0] - 1:
+            _mark(flags, i + 1, j, k)
+        if j > 0:
+            _mark(flags, i, j - 1, k)
+        if j < flags.shape[1] - 1:
+            _mark(flags, i, j + 1, k)
+        if k > 0:
+            _mark(flags, i, j, k - 1)
+        if k < flags.shape[2] - 1:
+            _mark(flags, i, j, k + 1)
+
+
+@wp.func
+def _band_distance(phi: wp.array3d[float], i: int, j: int, k: int, mode: int) -> float:
+    """Distance (index units) from a node to the zero set if it is next to a sign change, or BIG."""
+    nx = phi.shape[0]
+    ny = phi.shape[1]
+    nz = phi.shape[2]
+    im = wp.max(i - 1, 0)
+    ip = wp.min(i + 1, nx - 1)
+    jm = wp.max(j - 1, 0)
+    jp = wp.min(j + 1, ny - 1)
+    km = wp.max(k - 1, 0)
+    kp = wp.min(k + 1, nz - 1)
+    p = phi[i, j, k]
+    if p == 0.0:
+        return 0.0
+    pxm = phi[im, j, k]
+    pxp = phi[ip, j, k]
+    pym = phi[i, jm, k]
+    pyp = phi[i, jp, k]
+    pzm = phi[i, j, km]
+    pzp = phi[i, j, kp]
+    dx = wp.min(_crossing(p, pxm), _crossing(p, pxp))
+    dy = wp.min(_crossing(p, pym), _crossing(p, pyp))
+    dz = wp.min(_crossing(p, pzm), _crossing(p, pzp))
+    dmin = wp.min(dx, wp.min(dy, dz))
+    if dmin >= BIG:
+        return BIG
+    if dmin <= 0.0:
+        return 0.0  # underflow: a crossing closer than float32 resolves
+    # 1 / sqrt(sum 1 / d_axis^2), scaled by dmin so that no term overflows
+    rx = dmin / dx
+    ry = dmin / dy
+    rz = dmin / dz
+    dist = dmin / wp.sqrt(rx * rx + ry * ry + rz * rz)
+    if mode == 1:
+        gx = (pxp - pxm) / float(ip - im)
+        gy = (pyp - pym) / float(jp - jm)
+        gz = (pzp - pzm) / float(kp - km)
+        g = wp.sqrt(gx * gx + gy * gy + gz * gz)
+        if g > 0.0:
+            # a crossing on an edge is a point of the surface: the distance is at most dmin
+            dist = wp.min(wp.abs(p) / g, dmin)
+    return dist
+
+
+# The element-wise kernels run over (i, j, block of k): a block of ``chunk`` nodes along k per
+# thread (the whole row on the CPU, where each thread has a fixed cost; 1 on CUDA).
+
+
+@wp.kernel
+def init_band_kernel(
+    phi: wp.array3d[float],
+    mode: int,
+    chunk: int,
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    count: wp.array[wp.int32],
+):
+    """Freeze the nodes next to a sign change at their distance (index units); BIG elsewhere."""
+    i, j, kb = wp.tid()
+    frozen = wp.int32(0)
+    for c in range(chunk):
+        k = kb * chunk + c
+        if k < phi.shape[2]:
+            dist = _band_distance(phi, i, j, k, mode)
+            f = wp.int32(0)
+            if phi[i, j, k] < 0.0:
+                f = _INSIDE
+            if dist < BIG:
+                f = f + _FROZEN
+                frozen = frozen + 1
+            else:
+                f = f + _ACTIVE
+            d[i, j, k] = dist
+            flags[i, j, k] = wp.uint8(f)
+    if frozen > 0:
+        wp.atomic_add(count, 0, frozen)
+
+
+@wp.kernel
+def sweep_kernel(
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    pts: PointSet,
+    mode: int,
+    passes: int,
+    order: int,
+    level: int,
+    a0: int,
+    b0: int,
+):
+    """Sweep the nodes of plane a + b + c = level of one ordering, or (level < 0) all of them.
+
+    With ``level >= 0`` a thread updates one node of that plane of ordering ``order`` (bit set:
+    axis flipped); with ``level < 0`` a single thread does the 8 orderings ``passes`` times.
+    """
+    ta, tb = wp.tid()
+    nx = flags.shape[0]
+    ny = flags.shape[1]
+    nz = flags.shape[2]
+    if level >= 0:
+        a = a0 + ta
+        b = b0 + tb
+        c = level - a - b
+        if c < 0 or c >= nz:
+            return
+        i = a
+        if order & 1:
+            i = nx - 1 - a
+        j = b
+        if order & 2:
+            j = ny - 1 - b
+        k = c
+        if order & 4:
+            k = nz - 1 - c
+        _visit(d, flags, pts, mode, i, j, k)
+        return
+    for step in range(8 * passes):
+        o = step % 8
+        for a in range(nx):
+            i = a
+            if o & 1:
+                i = nx - 1 - a
+            for b in range(ny):
+                j = b
+                if o & 2:
+                    j = ny - 1 - b
+                for c in range(nz):
+                    k = c
+                    if o & 4:
+                        k = nz - 1 - c
+                    _visit(d, flags, pts, mode, i, j, k)
+
+
+@wp.kernel
+def apply_sign_kernel(
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    count: wp.array[wp.int32],
+    h: float,
+    chunk: int,
+    phi: wp.array3d[float],
+):
+    """Write the signed distance back into phi; leave phi unchanged if nothing was frozen."""
+    i, j, kb = wp.tid()
+    if count[0] == 0:
+        return
+    for c in range(chunk):
+        k = kb * chunk + c
+        if k < phi.shape[2]:
+            v = d[i, j, k] * h
+            if int(flags[i, j, k]) & _INSIDE:
+                v = -v
+            phi[i, j, k] = v
+
+
+@wp.kernel
+def clear_kernel(chunk: int, pts: PointSet, out: wp.array3d[float], flags: wp.array3d[wp.uint8]):
+    """Start every node with no nearest point, active and unfrozen; ``out`` at BIG."""
+    i, j, kb = wp.tid()
+    for c in range(chunk):
+        k = kb * chunk + c
+        if k < out.shape[2]:
+            out[i, j, k] = BIG
+            pts.nearest[i, j, k] = -1
+            flags[i, j, k] = wp.uint8(_ACTIVE)
+
+
+@wp.kernel
+def seed_points_kernel(pts: PointSet, phase: int, best: wp.array3d[float]):
+    """Seed the 4x4x4 nodes around each point with their nearest point, in two launches.
+
+    Phase 0: atomic min of the exact distance into ``best``; phase 1: a point whose distance
+    equals that minimum writes its index (ties: any of them).
+    """
+    p, a, b, c = wp.tid()
+    g = (pts.points[p] - pts.origin) * pts.inv_h
+    # the block of nodes floor(g) - 1 .. floor(g) + 2, shifted to lie inside the grid
+    i = int(wp.clamp(wp.floor(g[0]) - 1.0, 0.0, float(wp.max(best.shape[0] - 4, 0)))) + a
+    j = int(wp.clamp(wp.floor(g[1]) - 1.0, 0.0, float(wp.max(best.shape[1] - 4, 0)))) + b
+    k = int(wp.clamp(wp.floor(g[2]) - 1.0, 0.0, float(wp.max(best.shape[2] - 4, 0)))) + c
+    if i >= best.shape[0] or j >= best.shape[1] or k >= best.shape[2]:
+        return
+    dist = _point_distance(pts, p, wp.vec3(float(i), float(j), float(k)))
+    if phase == 0:
+        wp.atomic_min(best, i, j, k, dist)
+    elif dist == best[i, j, k]:
+        pts.nearest[i, j, k] = p
+
+
+@wp.kernel
+def write_capped_kernel(pts: PointSet, h: float, cap: float, chunk: int, out: wp.array3d[float]):
+    """Write the distance to each node's nearest point in world units, clamped to ``cap``."""
+    i, j, kb = wp.tid()
+    for c in range(chunk):
+        k = kb * chunk + c
+        if k < out.shape[2]:
+            g = wp.vec3(float(i), float(j), float(k))
+            out[i, j, k] = wp.min(_point_distance(pts, pts.nearest[i, j, k], g) * h, cap)
+
+
+class Redistancer:
+    """Fast-sweeping reinitialisation and point-set distance on one grid and one device.
+
+    The scratch arrays (a float32 distance, which :meth:`point_distance` reuses as the int32
+    index of each node's nearest point, and a uint8 flag per node: 5 bytes per node) and, for
+    the ``planes`` method, the recorded plane launches are made once here, so
+    :meth:`reinitialize` is nothing but launches (no allocation, no host synchronisation) and
+    can be captured in a Warp graph.
+
+    Args:
+        shape: Number of nodes along each axis.
+        spacing: Node spacing ``h`` in world units.
+        device: Warp device (or its name) to run on.
+        method: ``"serial"`` (one thread sweeps, fastest on the CPU), ``"planes"`` (parallel
+            sweeps over the planes ``i + j + k = const``, for CUDA) or ``"auto"`` (serial on a
+            CPU device, planes on CUDA).
+        band: How the nodes next to a sign change get their distance: ``"axis"`` (the linear
+            zero crossing along each axis, combined as ``1 / sqrt(sum 1 / d_axis^2)``) or
+            ``"gradient"`` (``|phi| / |grad phi|`` with central differences, one-sided at the
+            border, at most the nearest axis crossing).
+        passes: How many times the 8 sweeps are repeated.
+
+    Raises:
+        ValueError: If ``method`` or ``band`` is unknown, ``passes`` is below 1, ``spacing`` is
+            not positive or ``shape`` is not 3 positive sizes.
+    """
+
+    def __init__(
+        self,
+        shape: tuple[int, int, int],
+        spacing: float,
+        device: wp.context.Device | str,
+        *,
+        method: str = "auto",
+        band: str = "axis",
+        passes: int = 1,
+    ) -> None:
+        shape = tuple(int(s) for s in shape)
+        if len(shape) != 3 or min(shape) < 1:
+            raise ValueError(f"shape: must be 3 positive sizes, got {shape}")
+        if not spacing > 0.0:
+            raise ValueError(f"spacing: must be positive, got {spacing}")
+        if method not in METHODS:
+            raise ValueError(f"method: must be one of {METHODS}, got {method!r}")
+        if band not in BAND_MODES:
+            raise ValueError(f"band: must be one of {tuple(BAND_MODES)}, got {band!r}")
+        if int(passes) < 1:
+            raise ValueError(f"passes: must be at least 1, got {passes}")
+        self.device = wp.get_device(device)
+        self.shape = shape
+        self.spacing = float(spacing)
+        self.band = band
+        self.passes = int(passes)
+        if method == "auto":
+            method = "planes" if self.device.is_cuda else "serial"
+        self.method = method
+        # element-wise kernels: a whole row of k per thread on the CPU, one node on CUDA
+        self._chunk = 1 if self.device.is_cuda else shape[2]
+        self._rows = (shape[0], shape[1], (shape[2] + self._chunk - 1) // self._chunk)
+        self.distance = wp.empty(shape, dtype=float, device=self.device)
+        """Scratch: unsigned distance in index units."""
+        self.flags = wp.empty(shape, dtype=wp.uint8, device=self.device)
+        """Scratch: inside, frozen and active bits per node."""
+        self.band_count = wp.zeros(1, dtype=wp.int32, device=self.device)
+        """Number of band nodes found by the last :meth:`reinitialize` (0: no zero crossing)."""
+        # the nearest-point index of point_distance shares the memory of `distance`
+        nearest = wp.array(ptr=self.distance.ptr, dtype=wp.int32, shape=shape, device=self.device)
+        self._no_points = self._point_set(wp.empty(0, dtype=wp.vec3, device=self.device), nearest)
+        self._points = self._no_points
+        self._plane_launches = self._record_planes() if method == "planes" else []
+
+    def _point_set(
+        self, points: wp.array, nearest: wp.array3d, origin: wp.vec3 | None = None
+    ) -> PointSet:
+        pts = PointSet()
+        pts.points = points
+        pts.origin = wp.vec3(0.0, 0.0, 0.0) if origin is None else wp.vec3(*origin)
+        pts.inv_h = 1.0 / self.spacing
+        pts.nearest = nearest
+        return pts
+
+    def _record_planes(self) -> list[wp.Launch]:
+        nx, ny, nz = self.shape
+        launches = []
+        for order in range(8):
+            for level in range(nx + ny + nz - 2):
+                a_lo = max(0, level - (ny - 1) - (nz - 1))
+                a_hi = min(nx - 1, level)
+                b_lo = max(0, level - a_hi - (nz - 1))
+                b_hi = min(ny - 1, level - a_lo)
+                launches.append(
+                    wp.launch(
+                        sweep_kernel,
+                        dim=(a_hi - a_lo + 1, b_hi - b_lo + 1),
+                        inputs=[self.distance, self.flags, self._points, 0, 1]
+                        + [order, level, a_lo, b_lo],
+                        device=self.device,
+                        record_cmd=True,
+                    )
+                )
+        return launches
+
+    def _check(self, array: wp.array, name: str) -> None:
+        if tuple(array.shape) != self.shape or array.device != self.device:
+            raise ValueError(
+                f"{name}: expected shape {self.shape} on {self.device}, "
+                f"got {tuple(array.shape)} on {array.device}"
+            )
+        if array.dtype != wp.float32:
+            raise ValueError(f"{name}: expected float32, got {array.dtype}")
+
+    def _sweep(self, pts: PointSet) -> None:
+        mode = 0 if pts is self._no_points else 1
+        if self.method == "serial":
+            wp.launch(
+                sweep_kernel,
+                dim=(1, 1),
+                inputs=[self.distance, self.flags, pts, mode, self.passes, 0, -1, 0, 0],
+                device=self.device,
+            )
+            return
+        if pts is not self._points:
+            # rebind the recorded launches (host-side only)
+            for launch in self._plane_launches:
+                launch.set_param_by_name("pts", pts)
+                launch.set_param_by_name("mode", mode)
+            self._points = pts
+        for _ in range(self.passes):
+            for launch in self._plane_launches:
+                launch.launch()
+
+    def reinitialize(self, phi: wp.array3d) -> wp.array:
+        """Reset ``phi`` in place to the signed distance to its zero set.
+
+        The nodes next to a sign change (along any axis) get their distance from the band
+        formula and are frozen; every other node gets the fast-sweeping distance; signs are
+        kept. A node where ``phi`` is exactly 0 is a band node at distance 0. If ``phi`` has no
+        sign change and no zero, there is nothing to measure from: ``phi`` is left unchanged
+        and the returned counter reads 0.
+
+        Args:
+            phi: Level set of shape ``shape``, float32, on this device.
+
+        Returns:
+            :attr:`band_count`, a device array of one int32: the number of band nodes, 0 when
+            ``phi`` had no zero crossing. Reading it (``.numpy()``) synchronises.
+        """
+        self._check(phi, "phi")
+        self.band_count.zero_()
+        wp.launch(
+            init_band_kernel,
+            dim=self._rows,
+            inputs=[phi, BAND_MODES[self.band], self._chunk],
+            outputs=[self.distance, self.flags, self.band_count],
+            device=self.device,
+        )
+        self._sweep(self._no_points)
+        wp.launch(
+            apply_sign_kernel,
+            dim=self._rows,
+            inputs=[self.distance, self.flags, self.band_count, self.spacing, self._chunk],
+            outputs=[phi],
+            device=self.device,
+        )
+        return self.band_count
+
+    def point_distance(
+        self,
+        points: wp.array,
+        origin: wp.vec3 | tuple[float, float, float],
+        out: wp.array3d,
+        *,
+        cap: float | None = None,
+    ) -> None:
+        """Write the unsigned distance from every node to a point set into ``out``.
+
+        The 4x4x4 nodes around each point (shifted to lie inside the grid) are seeded with
+        their nearest such point (atomic min, so any number of points in any thread order); the
+        sweeps then pass each node the nearest of its neighbours' nearest points (the
+        closest-point variant of fast sweeping: exact but at rare nodes where Voronoi cells
+        meet in a sliver), and ``out`` gets the Euclidean distance to it. With no points
+        every node reads ``1e30 * h`` (or ``cap``).
+
+        Args:
+            points: World positions, ``wp.array`` of ``wp.vec3`` on this device.
+            origin: World position of node ``(0, 0, 0)``.
+            out: Output of shape ``shape``, float32, on this device; world units.
+            cap: If given, distances above it are clamped to it.
+        """
+        self._check(out, "out")
+        if points.device != self.device or points.dtype != wp.vec3:
+            raise ValueError(
+                f"points: expected a wp.vec3 array on {self.device}, "
+                f"got {points.dtype.__name__} on {points.device}"
+            )
+        pts = self._point_set(points, self._no_points.nearest, origin)
+        wp.launch(
+            clear_kernel,
+            dim=self._rows,
+            inputs=[self._chunk, pts],
+            outputs=[out, self.flags],
+            device=self.device,
+        )
+        if points.shape[0] > 0:
+            for phase in range(2):
+                wp.launch(
+                    seed_points_kernel,
+                    dim=(points.shape[0], 4, 4, 4),
+                    inputs=[pts, phase, out],
+                    device=self.device,
+                )
+        self._sweep(pts)
+        cap = float(BIG) * self.spacing if cap is None else float(cap)
+        wp.launch(
+            write_capped_kernel,
+            dim=self._rows,
+            inputs=[pts, self.spacing, cap, self._chunk],
+            outputs=[out],
+            device=self.device,
+        )

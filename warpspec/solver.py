@@ -1,0 +1,544 @@
+"""The reconstruction driver: owns the device arrays and advances the level set.
+
+The driver never loops over voxels on the host: every pass over the grid is a Warp kernel.
+``Reconstructor.step`` is nothing but launches; measures are reduced on the device and copied
+back only when asked for.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from ._runtime import init, resolve_device
+from .errors import ReconstructionError, SceneError
+from .grid import Grid
+from .initial import fit_height_field, plane_frame
+from .kernels.constraints import (
+    launch_bend,
+    launch_claim_normals,
+    launch_gaussian,
+    launch_height_field,
+    launch_plane,
+)
+from .kernels.differences import launch_flow_step, launch_init_flow_step
+from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_measures
+from .kernels.redistance import Redistancer
+from .mesh import extract_mesh
+from .scene import Scene
+
+__all__ = ["Reconstructor", "Result", "reconstruct"]
+
+MEASURE_KEYS = (
+    "iteration",
+    "normal_error",
+    "point_error",
+    "energy_normal",
+    "energy_point",
+    "energy_smooth",
+    "energy_total",
+    "active",
+    "misses",
+    "seconds",
+)
+
+
+@dataclass
+class Result:
+    """What a reconstruction returns.
+
+    Attributes:
+        mesh: The zero set as a ``trimesh.Trimesh`` in world coordinates, faces outward
+            (toward ``phi > 0`` and the cameras).
+        phi: The level set on the grid, ``float32``, indexed ``[i, j, k]``.
+        grid: The grid ``phi`` lives on.
+        history: Per-iteration measures, one dict per recorded iteration (keys:
+            ``iteration``, ``normal_error`` (mean ``1 - N.n`` over active rays),
+            ``point_error`` (mean ``|phi(y)|`` over the points, in voxel widths),
+            ``energy_normal``, ``energy_point``, ``energy_smooth``, ``energy_total``,
+            ``active``, ``misses``, ``seconds``).
+        hits: Ray intersections of the last iteration, ``(M, 3)``; NaN for missed rays.
+    """
+
+    mesh: object
+    phi: np.ndarray
+    grid: Grid
+    history: list[dict] = field(default_factory=list)
+    hits: np.ndarray | None = None
+
+    def constraint_anchors(self, scene: Scene) -> np.ndarray:
+        """The ray intersections that hit and the point constraints, stacked ``(n, 3)``."""
+        hits = np.empty((0, 3)) if self.hits is None else self.hits
+        return np.vstack([hits[np.all(np.isfinite(hits), axis=1)], scene.points.reshape(-1, 3)])
+
+    def save_phi(self, path: str | os.PathLike) -> None:
+        """Save the level set and its grid to an ``.npz`` file (``Reconstructor(resume=...)``)."""
+        save_state(path, self.phi, self.grid)
+
+
+def save_state(path: str | os.PathLike, phi: np.ndarray, grid: Grid) -> None:
+    """Write ``phi`` and its grid to ``path`` (NPZ), through a temporary file and a rename."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "wb") as f:
+        np.savez_compressed(f, phi=phi, origin=grid.origin, spacing=grid.spacing,
+                            shape=np.asarray(grid.shape))
+    os.replace(tmp, path)
+
+
+def load_state(path: str | os.PathLike) -> tuple[np.ndarray, Grid]:
+    """Read a level set saved by :func:`save_state`.
+
+    Raises:
+        SceneError: If the file is missing, unreadable or not a saved level set.
+    """
+    try:
+        with np.load(path) as data:
+            phi = np.array(data["phi"], dtype=np.float32)
+            grid = Grid(origin=data["origin"], spacing=float(data["spacing"]),
+                        shape=tuple(int(s) for s in data["shape"]))
+    except FileNotFoundError:
+        raise SceneError(f"resume: no such file {str(path)!r}") from None
+    except (OSError, KeyError, ValueError) as exc:
+        raise SceneError(
+            f"resume: {str(path)!r} is not a saved warpspec level set ({exc})"
+        ) from None
+    if phi.shape != grid.shape or not np.all(np.isfinite(phi)):
+        raise SceneError(f"resume: {str(path)!r} holds a level set that does not match its grid")
+    return phi, grid
+
+
+def _positive_int(name: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise SceneError(f"{name}: must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def _non_negative_int(name: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+        raise SceneError(f"{name}: must be a non-negative integer, got {value!r}")
+    return int(value)
+
+
+def _real(name: str, value: object, *, low: float | None = None, strict: bool = False,
+          high: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise SceneError(f"{name}: must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise SceneError(f"{name}: must be finite, got {value!r}")
+    if low is not None and (v <= low if strict else v < low):
+        bound = "greater than" if strict else "at least"
+        raise SceneError(f"{name}: must be {bound} {low}, got {value!r}")
+    if high is not None and v > high:
+        raise SceneError(f"{name}: must be at most {high}, got {value!r}")
+    return v
+
+
+def initial_plane(scene: Scene, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+    """The plane the paper starts from: a point on it and its unit normal toward the cameras.
+
+    Least squares through the points when there are three or more that are not collinear;
+    otherwise through their centroid (the domain's centre without points) with the mean of
+    the constraint normals as its normal.
+    """
+    points = scene.points
+    centres = scene.camera_centres()
+    if len(points):
+        centroid = points.mean(axis=0)
+    else:
+        centroid = grid.origin + 0.5 * (grid.upper - grid.origin)
+    normal = None
+    if len(points) >= 3:
+        _, s, vt = np.linalg.svd(points - centroid)
+        if s[1] > 1e-6 * max(s[0], 1e-300):
+            normal = vt[2]
+    if normal is None:
+        if scene.num_specularities:
+            origins, dirs = scene.rays()
+            # Where a ray passes closest to the centroid stands in for its unknown depth.
+            t = np.einsum("ij,ij->i", centroid - origins, dirs)
+            normal = scene.normals(origins + t[:, None] * dirs).mean(axis=0)
+        else:
+            normal = (centres - centroid).mean(axis=0)
+        if not np.linalg.norm(normal) > 1e-12:
+            raise SceneError(
+                "points: cannot place the initial plane: fewer than three non-collinear points "
+                "and no constraint normals to orient it; add points or specularities"
+            )
+    normal = normal / np.linalg.norm(normal)
+    if scene.num_specularities:
+        toward = centres[np.unique(scene.spec_camera)] - centroid
+    else:
+        toward = centres - centroid
+    if np.sum(toward @ normal) < 0:
+        normal = -normal
+    return centroid, normal
+
+
+class Reconstructor:
+    """Reconstruct a surface from a scene by level-set gradient descent (paper eq. 21).
+
+    Args:
+        scene: The scene (cameras, specularities, light, points).
+        resolution: Cells along the longest side of the domain.
+        alpha: Weight of the smoothness (surface area) term.
+        bulge: Bending ``c`` of the initial surface (paper eq. 23): a positive value moves it
+            toward the cameras by ``c`` times the distance to the nearest point.
+        bulge_cap: Cap ``d_max`` on that distance, in voxel widths (``None``: no cap).
+        device: Warp device or its name; ``None`` picks CUDA when available, else the CPU.
+        reinit_every: Reset ``phi`` to a signed distance every this many iterations (0: never).
+        point_weight: Rate ``w_P`` of the point term, in units of ``1/h^2`` (per unit time).
+            The exact decay holds the zero set where it is but cannot move it across a point;
+            a strong decay followed by reinitialisation snaps the zero set onto the node
+            nearest each point, so keep it small.
+        gaussian_width: Standard deviation ``eps`` of the point Gaussians, in voxel widths.
+        normal_radius: Radius ``r_N`` of the balls that carry the constraint normals, in voxel
+            widths.
+        cfl: Time step as a fraction of the parabolic limit ``h^2 / (6 (1 + alpha))``.
+        init_iterations: Steps of the Zhao-Osher-Fedkiw flow that pull the initial plane
+            toward the points before bending (0: the plane as it is).
+        fit_iterations: Rounds of the normal-informed start: a height field over the initial
+            plane is fitted to the points and to the normals where the rays meet the current
+            start (the bent plane first), then re-intersected. 0 gives the paper's start
+            (plane and bend) unchanged. The flow's normal term is local to the constraints,
+            so the shape between them comes from the start.
+        fit_degree: Highest total degree of that height field's polynomial.
+        margin: Margin around the points when the scene gives no domain, as a fraction of
+            the points' longest extent.
+        grid: Use this grid instead of deriving one from the scene.
+        resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used).
+
+    Raises:
+        SceneError: If an option is out of range, or the grid would not fit on the device.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        resolution: int = 64,
+        alpha: float = 0.01,
+        bulge: float = 0.0,
+        bulge_cap: float | None = None,
+        device: str | None = None,
+        reinit_every: int = 10,
+        point_weight: float = 0.02,
+        gaussian_width: float = 1.0,
+        normal_radius: float = 1.0,
+        cfl: float = 0.9,
+        init_iterations: int = 0,
+        fit_iterations: int = 5,
+        fit_degree: int = 4,
+        margin: float = 0.2,
+        grid: Grid | None = None,
+        resume: str | os.PathLike | None = None,
+    ) -> None:
+        if not isinstance(scene, Scene):
+            raise SceneError(f"scene: expected a warpspec.Scene, got {type(scene).__name__}")
+        self.scene = scene
+        self.alpha = _real("alpha", alpha, low=0.0)
+        self.bulge = _real("bulge", bulge)
+        self.bulge_cap = None if bulge_cap is None else _real("bulge_cap", bulge_cap,
+                                                               low=0.0, strict=True)
+        self.reinit_every = _non_negative_int("reinit_every", reinit_every)
+        self.point_weight = _real("point_weight", point_weight, low=0.0)
+        self.gaussian_width = _real("gaussian_width", gaussian_width, low=0.0, strict=True)
+        self.normal_radius = _real("normal_radius", normal_radius, low=0.0, strict=True)
+        self.cfl = _real("cfl", cfl, low=0.0, strict=True, high=1.0)
+        init_iterations = _non_negative_int("init_iterations", init_iterations)
+        self.fit_iterations = _non_negative_int("fit_iterations", fit_iterations)
+        self.fit_degree = _positive_int("fit_degree", fit_degree)
+        margin = _real("margin", margin, low=0.0)
+
+        resumed = None
+        if resume is not None:
+            resumed, grid = load_state(resume)
+        elif grid is None:
+            resolution = _positive_int("resolution", resolution)
+            lo, hi = scene.bounds(margin=margin)
+            grid = Grid.from_bounds(lo, hi, resolution=resolution)
+        self.grid = grid
+        self.device = resolve_device(device)
+        self._check_memory()
+
+        h = grid.spacing
+        self.dt = self.cfl * h * h / (6.0 * (1.0 + self.alpha))
+        self.w_point = self.point_weight / (h * h)
+        eps = self.gaussian_width * h
+        self.point_energy_weight = self.w_point * (2.0 * math.pi) ** 1.5 * eps**3
+        self.iteration = 0
+        self.history: list[dict] = []
+        self._clock = 0.0
+
+        d = self.device
+        shape = grid.shape
+        origins, dirs = scene.rays()
+        codes, vectors = scene.ray_lights()
+        m = len(origins)
+        self._origin = tuple(float(v) for v in grid.origin)
+        self.phi = wp.zeros(shape, dtype=float, device=d)
+        self._tmp = wp.zeros(shape, dtype=float, device=d)
+        self._gauss = wp.zeros(shape, dtype=float, device=d)
+        self._owner = wp.zeros(shape, dtype=int, device=d)
+        self._owner_dist = wp.zeros(shape, dtype=float, device=d)
+        self._ray_origin = wp.array(origins.astype(np.float32), dtype=wp.vec3, device=d)
+        self._ray_dir = wp.array(dirs.astype(np.float32), dtype=wp.vec3, device=d)
+        self._light_code = wp.array(codes.astype(np.int32), dtype=int, device=d)
+        self._light_vec = wp.array(vectors.astype(np.float32), dtype=wp.vec3, device=d)
+        self._hits = wp.zeros(m, dtype=wp.vec3, device=d)
+        self._active = wp.zeros(m, dtype=int, device=d)
+        self._normals = wp.zeros(m, dtype=wp.vec3, device=d)
+        self._points = wp.array(scene.points.astype(np.float32).reshape(-1, 3), dtype=wp.vec3,
+                                device=d)
+        self._sums = wp.zeros(NUM_SLOTS, dtype=wp.float64, device=d)
+        self._redistancer = Redistancer(shape, h, d)
+
+        launch_gaussian(self._points, self._gauss, origin=self._origin, spacing=h,
+                        eps=self.gaussian_width * h)
+        if resumed is not None:
+            self.phi.assign(wp.array(resumed, dtype=float, device=d))
+        else:
+            self._initialise(init_iterations)
+        self._intersect()
+
+    # -- set-up ---------------------------------------------------------------------------
+
+    def _check_memory(self) -> None:
+        need = self.grid.size * BYTES_PER_VOXEL
+        if self.device.is_cuda:
+            have = int(self.device.free_memory)
+        else:
+            try:
+                have = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+            except (ValueError, OSError, AttributeError):
+                have = None
+        if have is not None and need > have:
+            raise SceneError(
+                f"resolution: a {'x'.join(map(str, self.grid.shape))} grid needs about "
+                f"{need / 2**30:.1f} GiB on {self.device.alias} but only {have / 2**30:.1f} GiB "
+                "is free; lower the resolution"
+            )
+
+    def _point_distance(self, out: wp.array, cap: float | None) -> None:
+        self._redistancer.point_distance(self._points, self._origin, out, cap=cap)
+
+    def _initialise(self, init_iterations: int) -> None:
+        h = self.grid.spacing
+        point, normal = initial_plane(self.scene, self.grid)
+        launch_plane(self.phi, origin=self._origin, spacing=h, point=tuple(point),
+                     normal=tuple(normal))
+        have_points = self.scene.num_points > 0
+        if init_iterations and have_points:
+            dist = self._owner_dist
+            cap = None if self.bulge_cap is None else self.bulge_cap * h
+            self._point_distance(dist, cap)
+            dt = 0.5 * h * h / (6.0 * max(float(dist.numpy().max()), h))
+            for _ in range(init_iterations):
+                launch_init_flow_step(self.phi, dist, self._tmp, spacing=h, dt=dt)
+                self.phi, self._tmp = self._tmp, self.phi
+            self._redistancer.reinitialize(self.phi)
+        if self.bulge != 0.0 and have_points:
+            cap = None if self.bulge_cap is None else self.bulge_cap * h
+            self._point_distance(self._owner_dist, cap)
+            launch_bend(self.phi, self._owner_dist, self._tmp, spacing=h, c=self.bulge)
+            self.phi, self._tmp = self._tmp, self.phi
+            self._redistancer.reinitialize(self.phi)
+        self.bent_phi = self.phi.numpy()
+        if self.fit_iterations and self.scene.num_specularities:
+            self._fit_start(point, normal)
+        self.initial_phi = self.phi.numpy()
+
+    def _fit_start(self, point: np.ndarray, normal: np.ndarray) -> None:
+        """Refine the start with a height field fitted to the points and the normals.
+
+        The normals are taken where the rays meet the current start; the field is
+        re-intersected and refitted ``fit_iterations`` times.
+        """
+        frame = plane_frame(normal)
+        scale = 0.5 * float(np.max(self.grid.upper - self.grid.origin))
+        d = self.device
+        powers_np = None
+        for _ in range(self.fit_iterations):
+            self._intersect()
+            ok = self._active.numpy() == 1
+            if ok.sum() < 3:
+                break
+            fit = fit_height_field(point, frame, scale, self.scene.points,
+                                   self._hits.numpy()[ok].astype(np.float64),
+                                   self._normals.numpy()[ok].astype(np.float64),
+                                   degree=self.fit_degree)
+            powers_np = fit.powers
+            launch_height_field(
+                self.phi, wp.array(fit.coeffs.astype(np.float32), dtype=float, device=d),
+                wp.array(powers_np, dtype=wp.vec2i, device=d), origin=self._origin,
+                spacing=self.grid.spacing, point=tuple(point),
+                axes=tuple(tuple(r) for r in frame), scale=scale)
+            self._redistancer.reinitialize(self.phi)
+
+    # -- iteration ------------------------------------------------------------------------
+
+    def _intersect(self) -> None:
+        launch_intersect(self.phi, self._ray_origin, self._ray_dir, self._light_code,
+                         self._light_vec, self._hits, self._active, self._normals,
+                         origin=self._origin, spacing=self.grid.spacing)
+        launch_claim_normals(self._hits, self._active, self._owner_dist, self._owner,
+                             origin=self._origin, spacing=self.grid.spacing,
+                             radius=self.normal_radius * self.grid.spacing)
+
+    def step(
+        self, *, normal: bool = True, smooth: bool = True, points: bool = True,
+        intersect: bool = True,
+    ) -> None:
+        """Advance one iteration: intersect the rays, take one flow step, reinitialise on time.
+
+        Args:
+            normal: Include the normal term.
+            smooth: Include the smoothness term.
+            points: Include the point term.
+            intersect: Recompute the ray intersections first (``False`` keeps the last ones:
+                the flow then descends the normal energy of a fixed set of intersections).
+        """
+        if intersect:
+            self._intersect()
+        launch_flow_step(
+            self.phi, self._owner, self._normals, self._gauss, self._tmp,
+            spacing=self.grid.spacing, dt=self.dt,
+            normal_weight=1.0 if normal else 0.0,
+            alpha=self.alpha if smooth else 0.0,
+            point_weight=self.w_point if points else 0.0,
+        )
+        self.phi, self._tmp = self._tmp, self.phi
+        self.iteration += 1
+        if self.reinit_every and self.iteration % self.reinit_every == 0:
+            self._redistancer.reinitialize(self.phi)
+
+    def reinitialize(self) -> None:
+        """Reset ``phi`` to the signed distance to its zero set now."""
+        self._redistancer.reinitialize(self.phi)
+
+    def measures(self, *, intersect: bool = True) -> dict:
+        """Reduce the measures of the current state on the device and return them.
+
+        Args:
+            intersect: Intersect the rays with the current ``phi`` first (``False`` measures
+                against the intersections of the last step).
+
+        Raises:
+            ReconstructionError: If ``phi`` holds a non-finite value.
+        """
+        if intersect:
+            self._intersect()
+        launch_measures(self.phi, self._owner, self._normals, self._hits, self._active,
+                        self._points, self._sums, origin=self._origin, spacing=self.grid.spacing)
+        s = self._sums.numpy()
+        if s[MEASURE_SLOTS["nonfinite"]] > 0:
+            raise ReconstructionError(
+                f"iteration {self.iteration}: phi has {int(s[MEASURE_SLOTS['nonfinite']])} "
+                "non-finite values; "
+                "lower cfl or point_weight"
+            )
+        active = int(s[MEASURE_SLOTS["active"]])
+        npts = max(self.scene.num_points, 1)
+        e_n = float(s[MEASURE_SLOTS["energy_normal"]])
+        # E_P = sum |phi(y)|, weighted as the flow weighs it: w_P times the Gaussian's volume.
+        e_p = self.point_energy_weight * float(s[MEASURE_SLOTS["point_abs_sum"]])
+        e_s = float(s[MEASURE_SLOTS["energy_smooth"]])
+        return {
+            "iteration": self.iteration,
+            "normal_error": float(s[0] / active) if active else float("nan"),
+            "point_error": float(s[3] / npts / self.grid.spacing) if self.scene.num_points
+            else float("nan"),
+            "energy_normal": e_n,
+            "energy_point": e_p,
+            "energy_smooth": e_s,
+            "energy_total": e_n + e_p + self.alpha * e_s,
+            "active": active,
+            "misses": int(s[MEASURE_SLOTS["misses"]]),
+            "seconds": self._clock,
+        }
+
+    def run(
+        self,
+        iterations: int,
+        *,
+        measure_every: int = 1,
+        callback: Callable[[dict], None] | None = None,
+    ) -> list[dict]:
+        """Advance ``iterations`` steps, recording measures every ``measure_every`` of them.
+
+        Args:
+            iterations: Number of iterations.
+            measure_every: Record the measures every this many iterations (0: only the last).
+            callback: Called with each recorded measure dict (progress display).
+
+        Returns:
+            The measures recorded during this call (also appended to ``history``).
+        """
+        iterations = _positive_int("iterations", iterations)
+        measure_every = _non_negative_int("measure_every", measure_every)
+        recorded = []
+        if not self.history:
+            self._record(recorded, callback)
+        for n in range(1, iterations + 1):
+            start = time.perf_counter()
+            self.step()
+            self._clock += time.perf_counter() - start
+            if (measure_every and n % measure_every == 0) or n == iterations:
+                self._record(recorded, callback)
+        return recorded
+
+    def _record(self, recorded: list, callback: Callable[[dict], None] | None) -> None:
+        m = self.measures()
+        self.history.append(m)
+        recorded.append(m)
+        if callback is not None:
+            callback(m)
+
+    def phi_numpy(self) -> np.ndarray:
+        """A host copy of the current level set."""
+        return self.phi.numpy()
+
+    def result(self) -> Result:
+        """The current surface as a :class:`Result` (mesh, level set, grid, history).
+
+        Raises:
+            ReconstructionError: If the zero set has left the domain (no surface to mesh).
+        """
+        phi = self.phi.numpy()
+        self._intersect()
+        hits = self._hits.numpy().astype(np.float64)
+        hits[self._active.numpy() == 0] = np.nan
+        mesh = extract_mesh(phi, self.grid)
+        return Result(mesh=mesh, phi=phi, grid=self.grid, history=list(self.history), hits=hits)
+
+
+# Device bytes per voxel: phi, its ping-pong twin, G, owner and the owner's distance (4 each),
+# and the redistancer's scratch (at most 5).
+BYTES_PER_VOXEL = 25
+
+
+def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int = 300, **options) -> Result:
+    """Reconstruct a surface in one call.
+
+    Args:
+        scene: A :class:`Scene` or the path of a scene file.
+        iterations: Number of iterations of the flow.
+        **options: Keyword options of :class:`Reconstructor`.
+
+    Returns:
+        The :class:`Result`.
+    """
+    init()
+    if not isinstance(scene, Scene):
+        scene = Scene.load(scene)
+    solver = Reconstructor(scene, **options)
+    solver.run(iterations)
+    return solver.result()
