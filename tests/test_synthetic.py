@@ -1,0 +1,348 @@
+"""The synthetic scene generator: the reflection law holds exactly at the true points."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from warpspec.errors import SceneError
+from warpspec.synthetic import (
+    CameraLight,
+    Cylinder,
+    DirectionalLight,
+    Ellipsoid,
+    Halfspace,
+    Intrinsics,
+    MeshSurface,
+    Paraboloid,
+    Plane,
+    PointLight,
+    Saddle,
+    Sphere,
+    clip_mesh,
+    find_highlight,
+    look_at,
+    make_scene,
+    place_camera,
+    project,
+    scene_from_path,
+    scene_from_points,
+    scene_names,
+)
+
+NAMES = scene_names()
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return {name: make_scene(name) for name in NAMES}
+
+
+def design_ray(P, pixel):
+    """DESIGN section 2, written out: c = -M^-1 p4, r = normalize(sign(det M) M^-1 q)."""
+    P = np.asarray(P, dtype=float)
+    M, p4 = P[:, :3], P[:, 3]
+    c = -np.linalg.inv(M) @ p4
+    r = np.sign(np.linalg.det(M)) * np.linalg.inv(M) @ np.array([pixel[0], pixel[1], 1.0])
+    return c, r / np.linalg.norm(r)
+
+
+def light_vector(light, x, c):
+    """The unit vector L from x toward the light of a scene-file light dict."""
+    if light["type"] == "directional":
+        L = np.asarray(light["direction"], dtype=float)
+    elif light["type"] == "point":
+        L = np.asarray(light["position"], dtype=float) - x
+    else:
+        L = c - x
+    return L / np.linalg.norm(L)
+
+
+def check_reflection_law(scene_dict, truth_points, truth_normals, tol=1e-9):
+    light = scene_dict["light"]
+    for spec, x, n in zip(scene_dict["specularities"], truth_points, truth_normals, strict=True):
+        P = scene_dict["cameras"][spec["camera"]]["P"]
+        c, r = design_ray(P, spec["pixel"])
+        # The ray passes through the true point, in front of the camera.
+        depth = np.dot(x - c, r)
+        assert depth > 0
+        assert np.linalg.norm(np.cross(x - c, r)) < tol * np.linalg.norm(x - c)
+        # The reflection law gives the true normal.
+        N = light_vector(light, x, c) - r
+        N /= np.linalg.norm(N)
+        assert np.abs(N - n).max() < tol
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_reflection_law_holds_at_true_points(scenes, name):
+    s = scenes[name]
+    check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+    np.testing.assert_allclose(np.linalg.norm(s.truth_normals, axis=1), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_reflection_law_through_scene_loader(scenes, name):
+    scene_mod = pytest.importorskip("warpspec.scene")
+    s = scenes[name]
+    try:
+        loaded = s.scene()
+    except (AttributeError, NotImplementedError) as exc:  # loader still being written
+        pytest.skip(f"Scene.from_dict not ready: {exc}")
+    assert isinstance(loaded, scene_mod.Scene)
+    origins, dirs = loaded.rays()
+    x = s.truth_points
+    assert np.all(np.einsum("ij,ij->i", x - origins, dirs) > 0)
+    miss = np.linalg.norm(np.cross(x - origins, dirs), axis=1)
+    assert np.all(miss < 1e-9 * np.linalg.norm(x - origins, axis=1))
+    np.testing.assert_allclose(loaded.normals(points=x), s.truth_normals, atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_highlights_in_image_and_visible(scenes, name):
+    s = scenes[name]
+    assert np.all(s.intrinsics.contains(s.pixels))
+    for i, (x, n) in enumerate(zip(s.truth_points, s.truth_normals, strict=True)):
+        cam = s.camera_indices[i]
+        P = s.cameras[cam]
+        q, depth = project(P, x[None])
+        np.testing.assert_allclose(q[0], s.pixels[i], atol=1e-9)
+        assert depth[0] > 0
+        c = s.camera_centres[cam]
+        # The point faces the camera and the light.
+        assert np.dot(c - x, n) > 0
+        assert np.dot(s.light_directions[i], n) > 0
+        # The first hit of the ray from the camera is the point itself.
+        d = (x - c) / np.linalg.norm(x - c)
+        t = s.surface.intersect(c[None], d[None])[0]
+        assert abs(t - np.linalg.norm(x - c)) < 1e-9 * np.linalg.norm(x - c)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_domain_is_cut_by_the_surface_and_holds_no_camera(scenes, name):
+    s = scenes[name]
+    lo, hi = s.domain
+    g = [np.linspace(lo[k], hi[k], 9) for k in range(3)]
+    nodes = np.stack(np.meshgrid(*g, indexing="ij"), axis=-1).reshape(-1, 3)
+    phi = s.surface.implicit(nodes)
+    assert np.any(phi < 0) and np.any(phi > 0)
+    inside = lambda p: np.all((p >= lo) & (p <= hi), axis=-1)  # noqa: E731
+    assert not np.any(inside(s.camera_centres))
+    assert np.all(inside(s.points)) and np.all(inside(s.truth_points))
+    # Cameras on the outer side; point constraints on the surface.
+    assert np.all(s.surface.implicit(s.camera_centres) > 0)
+    assert np.abs(s.surface.signed_distance(s.points)).max() < 1e-12
+
+
+def test_builtin_scene_counts(scenes):
+    counts = {
+        name: (len(s.truth_points), len(s.cameras), len(s.points), s.scene_dict["light"]["type"])
+        for name, s in scenes.items()
+    }
+    assert counts["octant"] == (24, 24, 3, "directional")
+    assert counts["car-window"] == (38, 38, 2, "directional")
+    assert counts["wine-bottle"] == (11, 11, 4, "camera")
+    assert counts["ellipsoid-cap"][3] == "point"
+    np.testing.assert_array_equal(scenes["octant"].points, np.eye(3))
+
+
+def test_octant_points_spread_away_from_the_rim(scenes):
+    x = scenes["octant"].truth_points
+    assert x.min() >= math.sin(math.radians(6.0)) - 1e-12
+    d = np.linalg.norm(x[:, None] - x[None], axis=2) + np.eye(len(x)) * 9
+    assert d.min() > 0.15  # well spread: no two highlights close together
+    np.testing.assert_allclose(np.linalg.norm(x, axis=1), 1.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_truth_mesh_lies_on_the_surface_and_faces_outward(scenes, name):
+    s = scenes[name]
+    m = s.truth_mesh()
+    assert len(m.faces) > 100
+    centres = m.triangles_center
+    dots = np.einsum("ij,ij->i", m.face_normals, s.surface.normal(centres))
+    assert dots.min() > 0.9
+    # Vertices on the surface up to the cut along the patch planes.
+    assert np.abs(s.surface.signed_distance(m.vertices)).max() < 1e-2
+    # The specular points lie on the patch the mesh covers.
+    for hs in s.patch:
+        assert np.all(hs.contains(s.truth_points))
+
+
+def test_truth_mesh_areas():
+    assert make_scene("octant").truth_mesh().area == pytest.approx(math.pi / 2, rel=2e-3)
+    assert make_scene("car-window").truth_mesh().area == pytest.approx(0.6, rel=1e-3)
+    assert make_scene("wine-bottle").truth_mesh().area == pytest.approx(
+        0.04 * math.pi / 2 * 0.08, rel=1e-3)
+
+
+def test_same_seed_same_scene_different_seed_different():
+    a = make_scene("octant", noise=0.5, outliers=0.25, seed=3)
+    b = make_scene("octant", noise=0.5, outliers=0.25, seed=3)
+    c = make_scene("octant", noise=0.5, outliers=0.25, seed=4)
+    assert a.scene_dict == b.scene_dict
+    np.testing.assert_array_equal(a.outlier_mask, b.outlier_mask)
+    assert a.scene_dict != c.scene_dict
+    # The geometry does not depend on the seed.
+    np.testing.assert_array_equal(a.truth_points, c.truth_points)
+    assert a.scene_dict["cameras"] == c.scene_dict["cameras"]
+
+
+def test_noise_and_outliers():
+    clean = make_scene("car-window")
+    noisy = make_scene("car-window", noise=0.5, seed=1)
+    np.testing.assert_array_equal(clean.pixels, clean.clean_pixels)
+    dev = noisy.pixels - noisy.clean_pixels
+    assert 0.3 < dev.std() < 0.7
+    assert not np.any(noisy.outlier_mask)
+
+    bad = make_scene("car-window", outliers=0.25, seed=2)
+    assert bad.outlier_mask.sum() == round(0.25 * 38)
+    moved = np.linalg.norm(bad.pixels - bad.clean_pixels, axis=1) > 0
+    np.testing.assert_array_equal(moved, bad.outlier_mask)
+    assert np.all(bad.intrinsics.contains(bad.pixels))
+    # Inliers keep the law exactly.
+    keep = bad.inliers
+    specs = [sp for sp, k in zip(bad.scene_dict["specularities"], keep, strict=True) if k]
+    check_reflection_law({**bad.scene_dict, "specularities": specs},
+                         bad.truth_points[keep], bad.truth_normals[keep])
+
+
+def test_invalid_settings_raise():
+    with pytest.raises(SceneError, match="noise"):
+        make_scene("octant", noise=-1.0)
+    with pytest.raises(SceneError, match="outliers"):
+        make_scene("octant", outliers=1.5)
+    with pytest.raises(SceneError, match="unknown name"):
+        make_scene("teapot")
+    with pytest.raises(SceneError, match="behind"):
+        place_camera((0, 0, 1), (0, 0, 1), DirectionalLight((0, 0, -1)), distance=2)
+
+
+def test_json_round_trip_and_example_file_is_current(scenes):
+    s = scenes["octant"]
+    assert json.loads(s.to_json()) == s.scene_dict
+    path = EXAMPLES / "octant.json"
+    assert path.exists(), "run examples/make_scenes.py"
+    written = json.loads(path.read_text())
+    assert written["format"] == "warpspec-scene" and written["version"] == 1
+    assert written["light"] == s.scene_dict["light"]
+    assert written["specularities"] == [
+        {"camera": sp["camera"], "pixel": pytest.approx(sp["pixel"], abs=1e-9)}
+        for sp in s.scene_dict["specularities"]
+    ]
+    np.testing.assert_allclose([c["P"] for c in written["cameras"]],
+                               [c["P"] for c in s.scene_dict["cameras"]], rtol=1e-12, atol=1e-9)
+
+
+def test_look_at_puts_target_at_pixel():
+    intr = Intrinsics(focal=500.0, width=320, height=240)
+    P = look_at((3.0, -2.0, 1.0), (0.1, 0.2, 0.3), intrinsics=intr, pixel=(40.0, 200.0))
+    q, depth = project(P, np.array([[0.1, 0.2, 0.3]]))
+    np.testing.assert_allclose(q[0], (40.0, 200.0), atol=1e-9)
+    assert depth[0] > 0
+    R = np.linalg.solve(intr.matrix(), P[:, :3])
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("light", [DirectionalLight((0.0, 0.3, 1.0)), PointLight((0.5, 0.0, 4.0)),
+                                   CameraLight()], ids=["directional", "point", "camera"])
+@pytest.mark.parametrize("surface", [
+    Sphere((0.1, 0.0, 0.0), 1.0),
+    Ellipsoid((0.0, 0.0, 0.0), (1.0, 0.8, 0.6)),
+    Paraboloid((0.0, 0.0, 0.5), -0.5, -0.3),
+    Saddle((0.0, 0.0, 0.5), 0.3),
+], ids=["sphere", "ellipsoid", "paraboloid", "saddle"])
+def test_path_scene_finds_exact_highlights(surface, light):
+    ang = np.linspace(-0.6, 0.6, 7)
+    centres = np.column_stack([3 * np.sin(ang), -1.0 + 0 * ang, 3 * np.cos(ang)])
+    s = scene_from_path(surface, centres, light=light, look_at_points=(0.0, 0.0, 0.5),
+                        points=[[0.0, 0.0, 0.5]], domain=([-1.5] * 3, [1.5, 1.5, 1.2]))
+    # Convex surfaces show a highlight in every view; a saddle lit by the flash shows few.
+    assert len(s.truth_points) >= (7 if isinstance(surface, Sphere) else 1)
+    check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+    np.testing.assert_allclose(s.surface.implicit(s.truth_points), 0.0, atol=1e-12)
+
+
+def test_path_scene_skips_views_without_highlight():
+    sphere = Sphere((0.0, 0.0, 0.0), 1.0)
+    patch = (Halfspace((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),)
+    centres = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -3.0], [3.0, 0.0, 0.5]])
+    s = scene_from_path(sphere, centres, light=CameraLight(), look_at_points=(0.0, 0.0, 0.0),
+                        points=[[0.0, 0.0, 1.0]], domain=([-1.1] * 3, [1.1] * 3), patch=patch)
+    assert len(s.cameras) == 2
+    np.testing.assert_allclose(s.truth_points[0], (0.0, 0.0, 1.0), atol=1e-12)
+    assert find_highlight(sphere, (0.0, 0.0, -3.0), CameraLight(), patch=patch) is None
+
+
+def test_cylinder_and_plane_scenes():
+    cyl = Cylinder((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.5, reference=(0.0, 1.0, 0.0))
+    spec = cyl.at(np.array([-0.4, 0.0, 0.5]), np.array([0.1, 0.0, -0.1]))
+    s = scene_from_points(cyl, spec, light=DirectionalLight((0.0, 1.0, 0.5)),
+                          points=[[0.0, 0.5, 0.0]], domain=([-0.6, 0.0, -0.5], [0.6, 0.6, 0.5]),
+                          pixel="centre")
+    check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+    np.testing.assert_allclose(s.pixels, [s.intrinsics.centre] * 3, atol=1e-9)
+
+    plane = Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    spec = np.array([[0.1, 0.2, 0.0], [-0.3, 0.1, 0.0]])
+    s = scene_from_points(plane, spec, light=PointLight((0.0, 0.0, 2.0)),
+                          points=[[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                          domain=([-1.2] * 3, [1.2] * 3))
+    check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+
+
+def test_mesh_surface_orients_and_reflects():
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    inside_out = trimesh.Trimesh(ico.vertices, ico.faces[:, ::-1])
+    surf = MeshSurface(inside_out)
+    assert surf.closed and surf.mesh().volume > 0
+    # Signed distance: sign right away from the surface, magnitude exact on the faces.
+    q = np.random.default_rng(0).normal(size=(300, 3))
+    r = np.linalg.norm(q, axis=1)
+    far = np.abs(r - 0.995) > 0.02
+    assert np.all(np.sign(surf.signed_distance(q[far])) == np.sign(r[far] - 0.995))
+    np.testing.assert_allclose(surf.normal(ico.triangles_center), ico.face_normals, atol=1e-12)
+
+    # Points on faces seen under a point light.
+    pts = surf.sample(60, seed=1)
+    pts = pts[pts[:, 2] > 0.6][:6]
+    s = scene_from_points(surf, pts, light=PointLight((0.0, 0.0, 5.0)),
+                          points=[[0, 0, 1], [1, 0, 0], [0, 1, 0]],
+                          domain=([-1.2] * 3, [1.2] * 3))
+    check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+
+    # A flash camera on a face normal sees its highlight at the face's foot point.
+    fc, fn = ico.triangles_center[::150], ico.face_normals[::150]
+    s = scene_from_path(surf, fc + 3 * fn, light=CameraLight(), look_at_points=(0.0, 0.0, 0.0),
+                        points=[[0, 0, 1], [1, 0, 0], [0, 1, 0]], domain=([-1.2] * 3, [1.2] * 3))
+    assert len(s.cameras) == len(fc)
+    np.testing.assert_allclose(s.truth_points, fc, atol=1e-12)
+    check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+
+
+def test_analytic_closest_points():
+    q = np.random.default_rng(3).normal(size=(400, 3)) * 0.8
+    for surf in (Ellipsoid((0.1, 0.0, 0.0), (1.0, 0.7, 0.5)), Saddle((0.0, 0.0, 0.0), 0.4),
+                 Paraboloid((0.0, 0.0, 0.2), -0.6, -0.4), Sphere((0, 0, 0), 0.7),
+                 Cylinder((0, 0, 0), (1, 1, 0), 0.3), Plane((0, 0, 0.1), (1, 2, 3))):
+        cp = surf.closest_point(q)
+        assert np.abs(surf.implicit(cp)).max() < 1e-12
+        # The offset from the closest point is along the normal.
+        off = q - cp
+        sine = np.linalg.norm(np.cross(off, surf.normal(cp)), axis=1)
+        assert np.all(sine < 1e-7 * np.maximum(np.linalg.norm(off, axis=1), 1e-300) + 1e-12)
+
+
+def test_clip_mesh_cuts_along_the_plane():
+    plane = Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), size=2.0)
+    m = plane.mesh(resolution=10)
+    cut = clip_mesh(m, [Halfspace((0.33, 0.0, 0.0), (1.0, 0.0, 0.0)),
+                        Halfspace((0.0, -0.5, 0.0), (0.0, 1.0, 0.0))])
+    assert cut.area == pytest.approx((1.0 - 0.33) * 1.5, rel=1e-12)
+    assert cut.vertices[:, 0].min() == pytest.approx(0.33, abs=1e-12)
+    assert np.all(cut.face_normals[:, 2] > 0.999)
