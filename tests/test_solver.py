@@ -157,3 +157,16 @@ def test_a_run_that_loses_its_surface_says_so(octant):
     solver.phi.fill_(1.0)
     with pytest.raises(ws.ReconstructionError, match="no surface"):
         solver.result()
+
+
+def test_narrow_band_gives_the_dense_result(octant, device):
+    phis = []
+    for band in (None, 6.0):
+        solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, narrow_band=band,
+                                  device=device)
+        solver.run(40, measure_every=0)
+        phis.append(solver.phi.numpy())
+        h = solver.grid.spacing
+    dense, banded = phis
+    near = np.abs(dense) < 2 * h
+    assert np.max(np.abs(dense - banded)[near]) <= 1e-4 * h

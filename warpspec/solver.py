@@ -28,7 +28,12 @@ from .kernels.constraints import (
     launch_height_field,
     launch_plane,
 )
-from .kernels.differences import launch_flow_step, launch_init_flow_step
+from .kernels.differences import (
+    launch_build_band,
+    launch_flow_step,
+    launch_flow_step_band,
+    launch_init_flow_step,
+)
 from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_measures
 from .kernels.redistance import Redistancer
 from .mesh import extract_mesh
@@ -213,6 +218,8 @@ class Reconstructor:
         fit_degree: Highest total degree of that height field's polynomial.
         margin: Margin around the points when the scene gives no domain, as a fraction of
             the points' longest extent.
+        narrow_band: Update only the nodes within this many voxel widths of the zero set
+            (the band is rebuilt at every reinitialisation); ``None`` updates every node.
         grid: Use this grid instead of deriving one from the scene.
         resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used).
 
@@ -238,6 +245,7 @@ class Reconstructor:
         fit_iterations: int = 5,
         fit_degree: int = 4,
         margin: float = 0.2,
+        narrow_band: float | None = 6.0,
         grid: Grid | None = None,
         resume: str | os.PathLike | None = None,
     ) -> None:
@@ -257,6 +265,8 @@ class Reconstructor:
         self.fit_iterations = _non_negative_int("fit_iterations", fit_iterations)
         self.fit_degree = _positive_int("fit_degree", fit_degree)
         margin = _real("margin", margin, low=0.0)
+        self.narrow_band = None if narrow_band is None else _real(
+            "narrow_band", narrow_band, low=3.0)
 
         resumed = None
         if resume is not None:
@@ -288,7 +298,6 @@ class Reconstructor:
         self._tmp = wp.zeros(shape, dtype=float, device=d)
         self._gauss = wp.zeros(shape, dtype=float, device=d)
         self._owner = wp.zeros(shape, dtype=int, device=d)
-        self._owner_dist = wp.zeros(shape, dtype=float, device=d)
         self._ray_origin = wp.array(origins.astype(np.float32), dtype=wp.vec3, device=d)
         self._ray_dir = wp.array(dirs.astype(np.float32), dtype=wp.vec3, device=d)
         self._light_code = wp.array(codes.astype(np.int32), dtype=int, device=d)
@@ -300,6 +309,13 @@ class Reconstructor:
                                 device=d)
         self._sums = wp.zeros(NUM_SLOTS, dtype=wp.float64, device=d)
         self._redistancer = Redistancer(shape, h, d)
+        # The ownership pass and the redistancer never run at once: they share a scratch field.
+        self._owner_dist = self._redistancer.distance
+        self._band = None
+        self._band_count = wp.zeros(1, dtype=int, device=d)
+        self._band_size = 0
+        if self.narrow_band is not None:
+            self._band = wp.zeros(grid.size, dtype=int, device=d)
 
         launch_gaussian(self._points, self._gauss, origin=self._origin, spacing=h,
                         eps=self.gaussian_width * h)
@@ -307,6 +323,7 @@ class Reconstructor:
             self.phi.assign(wp.array(resumed, dtype=float, device=d))
         else:
             self._initialise(init_iterations)
+        self._rebuild_band()
         self._intersect()
 
     # -- set-up ---------------------------------------------------------------------------
@@ -393,6 +410,28 @@ class Reconstructor:
                              origin=self._origin, spacing=self.grid.spacing,
                              radius=self.normal_radius * self.grid.spacing)
 
+    def _rebuild_band(self) -> None:
+        """Collect the narrow band around the current zero set.
+
+        Both buffers of the ping-pong pair get the current ``phi``: the band step writes only
+        the band, so every other node must agree in both.
+        """
+        if self._band is None:
+            return
+        wp.copy(self._tmp, self.phi)
+        launch_build_band(self.phi, self._band, self._band_count,
+                          width=self.narrow_band * self.grid.spacing)
+        # On the CPU the launch is synchronous and the count costs nothing to read; on CUDA
+        # the band kernels run at full capacity and skip the threads past the count.
+        if self.device.is_cpu:
+            self._band_size = int(self._band_count.numpy()[0])
+        else:
+            self._band_size = self._band.shape[0]
+
+    def _reinitialize(self) -> None:
+        self._redistancer.reinitialize(self.phi)
+        self._rebuild_band()
+
     def step(
         self, *, normal: bool = True, smooth: bool = True, points: bool = True,
         intersect: bool = True,
@@ -408,21 +447,28 @@ class Reconstructor:
         """
         if intersect:
             self._intersect()
-        launch_flow_step(
-            self.phi, self._owner, self._normals, self._gauss, self._tmp,
-            spacing=self.grid.spacing, dt=self.dt,
-            normal_weight=1.0 if normal else 0.0,
-            alpha=self.alpha if smooth else 0.0,
-            point_weight=self.w_point if points else 0.0,
-        )
+        weights = {
+            "spacing": self.grid.spacing,
+            "dt": self.dt,
+            "normal_weight": 1.0 if normal else 0.0,
+            "alpha": self.alpha if smooth else 0.0,
+            "point_weight": self.w_point if points else 0.0,
+        }
+        if self._band is None:
+            launch_flow_step(self.phi, self._owner, self._normals, self._gauss, self._tmp,
+                             **weights)
+        else:
+            launch_flow_step_band(self.phi, self._owner, self._normals, self._gauss,
+                                  self._band, self._band_count, self._tmp,
+                                  size=self._band_size, **weights)
         self.phi, self._tmp = self._tmp, self.phi
         self.iteration += 1
         if self.reinit_every and self.iteration % self.reinit_every == 0:
-            self._redistancer.reinitialize(self.phi)
+            self._reinitialize()
 
     def reinitialize(self) -> None:
         """Reset ``phi`` to the signed distance to its zero set now."""
-        self._redistancer.reinitialize(self.phi)
+        self._reinitialize()
 
     def measures(self, *, intersect: bool = True) -> dict:
         """Reduce the measures of the current state on the device and return them.
@@ -437,7 +483,8 @@ class Reconstructor:
         if intersect:
             self._intersect()
         launch_measures(self.phi, self._owner, self._normals, self._hits, self._active,
-                        self._points, self._sums, origin=self._origin, spacing=self.grid.spacing)
+                        self._points, self._sums, origin=self._origin, spacing=self.grid.spacing,
+                        band=self._band, count=self._band_count, size=self._band_size)
         s = self._sums.numpy()
         if s[MEASURE_SLOTS["nonfinite"]] > 0:
             raise ReconstructionError(
@@ -520,8 +567,8 @@ class Reconstructor:
         return Result(mesh=mesh, phi=phi, grid=self.grid, history=list(self.history), hits=hits)
 
 
-# Device bytes per voxel: phi, its ping-pong twin, G, owner and the owner's distance (4 each),
-# and the redistancer's scratch (at most 5).
+# Device bytes per voxel: phi, its ping-pong twin, G, owner and the narrow band's list (4 each),
+# and the redistancer's scratch (5, shared with the ownership pass).
 BYTES_PER_VOXEL = 25
 
 

@@ -179,9 +179,9 @@ def height_field(
     u = wp.dot(d, axis_u) / scale
     v = wp.dot(d, axis_v) / scale
     w = wp.dot(d, normal)
-    z = 0.0
-    zu = 0.0
-    zv = 0.0
+    z = float(0.0)
+    zu = float(0.0)
+    zv = float(0.0)
     for m in range(coeffs.shape[0]):
         a = powers[m][0]
         b = powers[m][1]

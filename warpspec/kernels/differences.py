@@ -27,7 +27,9 @@ __all__ = [
     "init_flow_step",
     "launch_central_gradient",
     "launch_curvature_term",
+    "launch_build_band",
     "launch_flow_step",
+    "launch_flow_step_band",
     "launch_init_flow_step",
     "launch_upwind_gradient_norm",
     "upwind_gradient_norm",
@@ -153,7 +155,7 @@ def upwind_gradient_norm(
 
     The one-sided differences are second-order ENO.
     """
-    s = 0.0
+    s = float(0.0)
     for axis in range(3):
         d = one_sided(phi, i, j, k, axis, inv_h)
         if speed >= 0.0:
@@ -212,6 +214,39 @@ def normal_divergence(
     return (dx + dy + dz) * inv_2h
 
 
+@wp.func
+def advance(
+    phi: wp.array3d[float],
+    owner: wp.array3d[int],
+    normals: wp.array[wp.vec3],
+    gauss: wp.array3d[float],
+    i: int,
+    j: int,
+    k: int,
+    h: float,
+    dt: float,
+    normal_weight: float,
+    alpha: float,
+    point_weight: float,
+) -> float:
+    """The value of one node after one step of the total-energy flow."""
+    inv_2h = 0.5 / h
+    rate = float(0.0)
+    if alpha != 0.0:
+        rate += alpha * curvature_term(phi, i, j, k, h)
+    if normal_weight != 0.0:
+        div = normal_divergence(phi, owner, normals, i, j, k, inv_2h)
+        if div != 0.0:
+            g = wp.length(central_gradient(phi, i, j, k, inv_2h))
+            rate += normal_weight * g * div
+    value = phi[i, j, k] + dt * rate
+    if point_weight != 0.0:
+        w = gauss[i, j, k]
+        if w > 0.0:
+            value *= wp.exp(-point_weight * w * dt)
+    return value
+
+
 @wp.kernel
 def flow_step(
     phi: wp.array3d[float],
@@ -227,19 +262,50 @@ def flow_step(
 ):
     """One explicit step of the total-energy flow (paper eq. 21), point term decayed exactly."""
     i, j, k = wp.tid()
-    inv_2h = 0.5 / h
-    rate = 0.0
-    if alpha != 0.0:
-        rate += alpha * curvature_term(phi, i, j, k, h)
-    if normal_weight != 0.0:
-        div = normal_divergence(phi, owner, normals, i, j, k, inv_2h)
-        if div != 0.0:
-            g = wp.length(central_gradient(phi, i, j, k, inv_2h))
-            rate += normal_weight * g * div
-    value = phi[i, j, k] + dt * rate
-    if point_weight != 0.0:
-        value *= wp.exp(-point_weight * gauss[i, j, k] * dt)
-    out[i, j, k] = value
+    out[i, j, k] = advance(phi, owner, normals, gauss, i, j, k, h, dt, normal_weight, alpha,
+                           point_weight)
+
+
+@wp.func
+def unflatten(t: int, shape: wp.vec3i) -> wp.vec3i:
+    """Node ``(i, j, k)`` of the linear index ``t`` of a C-ordered 3-D array."""
+    plane = shape[1] * shape[2]
+    return wp.vec3i(t // plane, (t // shape[2]) % shape[1], t % shape[2])
+
+
+@wp.kernel
+def flow_step_band(
+    phi: wp.array3d[float],
+    owner: wp.array3d[int],
+    normals: wp.array[wp.vec3],
+    gauss: wp.array3d[float],
+    band: wp.array[int],
+    count: wp.array[int],
+    h: float,
+    dt: float,
+    normal_weight: float,
+    alpha: float,
+    point_weight: float,
+    out: wp.array3d[float],
+):
+    """The flow step on the nodes of a narrow band only (``band[:count[0]]``, linear indices)."""
+    s = wp.tid()
+    if s >= count[0]:
+        return
+    n = unflatten(band[s], wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    out[n[0], n[1], n[2]] = advance(phi, owner, normals, gauss, n[0], n[1], n[2], h, dt,
+                                    normal_weight, alpha, point_weight)
+
+
+@wp.kernel
+def build_band(
+    phi: wp.array3d[float], width: float, band: wp.array[int], count: wp.array[int]
+):
+    """Append every node with ``|phi| <= width`` to ``band`` (order is not significant)."""
+    i, j, k = wp.tid()
+    if wp.abs(phi[i, j, k]) <= width:
+        slot = wp.atomic_add(count, 0, 1)
+        band[slot] = (i * phi.shape[1] + j) * phi.shape[2] + k
 
 
 @wp.kernel
@@ -261,7 +327,7 @@ def init_flow_step(
     c = phi[i, j, k]
     gd = central_gradient(dist, i, j, k, inv_2h)
     # phi_t = grad d . grad phi: a front carried with velocity u = -grad d, upwind on u.
-    adv = 0.0
+    adv = float(0.0)
     for axis in range(3):
         d = one_sided(phi, i, j, k, axis, inv_h)
         if gd[axis] < 0.0:
@@ -330,6 +396,59 @@ def launch_flow_step(
         outputs=[out],
         device=phi.device,
     )
+
+
+def launch_flow_step_band(
+    phi: wp.array,
+    owner: wp.array,
+    normals: wp.array,
+    gauss: wp.array,
+    band: wp.array,
+    count: wp.array,
+    out: wp.array,
+    *,
+    size: int,
+    spacing: float,
+    dt: float,
+    normal_weight: float = 1.0,
+    alpha: float = 0.0,
+    point_weight: float = 0.0,
+) -> None:
+    """Advance the nodes of a narrow band by one step of the flow into ``out``.
+
+    Args:
+        phi: Level set.
+        owner: Constraint owner per node (see :func:`launch_flow_step`).
+        normals: Constraint normals.
+        gauss: Point-attraction field.
+        band: Linear indices of the band's nodes (:func:`launch_build_band`).
+        count: One int, the number of valid entries of ``band``.
+        out: Destination; nodes outside the band are not written.
+        size: Threads to launch: the band's size when known on the host (CPU), else the
+            capacity of ``band`` (threads past ``count`` return at once; graph-capturable).
+        spacing: Grid spacing ``h``.
+        dt: Time step.
+        normal_weight: Weight of the normal term.
+        alpha: Weight of the smoothness term.
+        point_weight: ``w_P``.
+    """
+    if size == 0:
+        return
+    wp.launch(
+        flow_step_band,
+        dim=size,
+        inputs=[phi, owner, normals, gauss, band, count, float(spacing), float(dt),
+                float(normal_weight), float(alpha), float(point_weight)],
+        outputs=[out],
+        device=phi.device,
+    )
+
+
+def launch_build_band(phi: wp.array, band: wp.array, count: wp.array, *, width: float) -> None:
+    """Collect the nodes with ``|phi| <= width`` into ``band``; their number into ``count``."""
+    count.zero_()
+    wp.launch(build_band, dim=phi.shape, inputs=[phi, float(width)], outputs=[band, count],
+              device=phi.device)
 
 
 def launch_init_flow_step(

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .differences import central_gradient, unit_normal
+from .differences import central_gradient, unflatten, unit_normal
 
 wp.set_module_options({"enable_backward": False})
 
@@ -95,7 +95,7 @@ def trilinear_gradient(phi: wp.array3d[float], origin: wp.vec3, h: float, x: wp.
 @wp.func
 def slab(o: wp.vec3, d: wp.vec3, lo: wp.vec3, hi: wp.vec3) -> wp.vec2:
     """Parameter interval ``[t0, t1]`` of the ray ``o + t d`` inside a box (empty: t0 > t1)."""
-    t0 = 0.0
+    t0 = float(0.0)
     t1 = 1.0e30
     for a in range(3):
         if wp.abs(d[a]) < 1.0e-12:
@@ -205,6 +205,38 @@ def measure_points(
     wp.atomic_add(sums, 3, wp.float64(wp.abs(trilinear(phi, origin, h, points[p]))))
 
 
+@wp.func
+def measure_node(
+    phi: wp.array3d[float],
+    owner: wp.array3d[int],
+    normals: wp.array[wp.vec3],
+    i: int,
+    j: int,
+    k: int,
+    h: float,
+    sums: wp.array[wp.float64],
+):
+    """One node's share of ``E_N`` and the surface area, or of the non-finite count.
+
+    Surface integrals use the smeared delta ``(1 + cos(pi phi / w)) / (2 w)``, ``w = 1.5 h``.
+    """
+    c = phi[i, j, k]
+    if not wp.isfinite(c):
+        wp.atomic_add(sums, 6, wp.float64(1.0))
+        return
+    width = 1.5 * h
+    if wp.abs(c) >= width:
+        return
+    delta = (1.0 + wp.cos(wp.pi * c / width)) / (2.0 * width)
+    grad = wp.length(central_gradient(phi, i, j, k, 0.5 / h))
+    ds = delta * grad * h * h * h
+    wp.atomic_add(sums, 5, wp.float64(ds))
+    o = owner[i, j, k]
+    if o >= 0 and o < normals.shape[0]:
+        n = unit_normal(phi, i, j, k, 0.5 / h)
+        wp.atomic_add(sums, 4, wp.float64((1.0 - wp.dot(normals[o], n)) * ds))
+
+
 @wp.kernel
 def measure_grid(
     phi: wp.array3d[float],
@@ -213,27 +245,27 @@ def measure_grid(
     h: float,
     sums: wp.array[wp.float64],
 ):
-    """Grid integrals: ``E_N`` and the surface area; the count of non-finite values.
-
-    Surface integrals use the smeared delta ``(1 + cos(pi phi / w)) / (2 w)``, ``w = 1.5 h``.
-    """
+    """Grid integrals over every node: ``E_N``, the surface area, non-finite values."""
     i, j, k = wp.tid()
-    c = phi[i, j, k]
-    if not wp.isfinite(c):
-        wp.atomic_add(sums, 6, wp.float64(1.0))
+    measure_node(phi, owner, normals, i, j, k, h, sums)
+
+
+@wp.kernel
+def measure_band(
+    phi: wp.array3d[float],
+    owner: wp.array3d[int],
+    normals: wp.array[wp.vec3],
+    band: wp.array[int],
+    count: wp.array[int],
+    h: float,
+    sums: wp.array[wp.float64],
+):
+    """Grid integrals over the nodes of a narrow band (the only ones that change)."""
+    s = wp.tid()
+    if s >= count[0]:
         return
-    cell = h * h * h
-    width = 1.5 * h
-    if wp.abs(c) >= width:
-        return
-    delta = (1.0 + wp.cos(wp.pi * c / width)) / (2.0 * width)
-    grad = wp.length(central_gradient(phi, i, j, k, 0.5 / h))
-    ds = delta * grad * cell
-    wp.atomic_add(sums, 5, wp.float64(ds))
-    o = owner[i, j, k]
-    if o >= 0 and o < normals.shape[0]:
-        n = unit_normal(phi, i, j, k, 0.5 / h)
-        wp.atomic_add(sums, 4, wp.float64((1.0 - wp.dot(normals[o], n)) * ds))
+    n = unflatten(band[s], wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    measure_node(phi, owner, normals, n[0], n[1], n[2], h, sums)
 
 
 def launch_intersect(
@@ -286,8 +318,15 @@ def launch_measures(
     *,
     origin: tuple[float, float, float],
     spacing: float,
+    band: wp.array | None = None,
+    count: wp.array | None = None,
+    size: int = 0,
 ) -> None:
-    """Zero ``sums`` (float64, :data:`MEASURE_SLOTS`) and accumulate every measure into it."""
+    """Zero ``sums`` (float64, :data:`MEASURE_SLOTS`) and accumulate every measure into it.
+
+    With ``band`` (and its ``count`` and launch ``size``), the grid integrals visit only the
+    band's nodes, which hold the whole zero set and every node that changes.
+    """
     sums.zero_()
     o = wp.vec3(*origin)
     h = float(spacing)
@@ -297,5 +336,9 @@ def launch_measures(
     if points.shape[0] > 0:
         wp.launch(measure_points, dim=points.shape[0], inputs=[phi, o, h, points],
                   outputs=[sums], device=phi.device)
-    wp.launch(measure_grid, dim=phi.shape, inputs=[phi, owner, normals, h], outputs=[sums],
-              device=phi.device)
+    if band is None:
+        wp.launch(measure_grid, dim=phi.shape, inputs=[phi, owner, normals, h],
+                  outputs=[sums], device=phi.device)
+    elif size > 0:
+        wp.launch(measure_band, dim=size, inputs=[phi, owner, normals, band, count, h],
+                  outputs=[sums], device=phi.device)
