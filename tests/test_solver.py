@@ -170,3 +170,12 @@ def test_narrow_band_gives_the_dense_result(octant, device):
     dense, banded = phis
     near = np.abs(dense) < 2 * h
     assert np.max(np.abs(dense - banded)[near]) <= 1e-4 * h
+
+
+def test_graph_replay_gives_the_launch_by_launch_result(octant, device):
+    phis = []
+    for graph in (False, True):
+        solver = ws.Reconstructor(octant, resolution=24, bulge=0.5, graph=graph, device=device)
+        solver.run(25, measure_every=5)
+        phis.append(solver.phi.numpy())
+    np.testing.assert_array_equal(phis[0], phis[1])

@@ -220,6 +220,9 @@ class Reconstructor:
             the points' longest extent.
         narrow_band: Update only the nodes within this many voxel widths of the zero set
             (the band is rebuilt at every reinitialisation); ``None`` updates every node.
+        graph: Capture each iteration's launches as a Warp graph and replay it; ``None``
+            captures on CUDA, where it saves most launch overhead (on the CPU the band's size
+            changes at every reinitialisation, and each change costs a new capture).
         grid: Use this grid instead of deriving one from the scene.
         resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used).
 
@@ -246,6 +249,7 @@ class Reconstructor:
         fit_degree: int = 4,
         margin: float = 0.2,
         narrow_band: float | None = 6.0,
+        graph: bool | None = None,
         grid: Grid | None = None,
         resume: str | os.PathLike | None = None,
     ) -> None:
@@ -286,6 +290,7 @@ class Reconstructor:
         self.point_energy_weight = self.w_point * (2.0 * math.pi) ** 1.5 * eps**3
         self.iteration = 0
         self.history: list[dict] = []
+        self._graphs: dict = {}
         self._clock = 0.0
 
         d = self.device
@@ -314,6 +319,7 @@ class Reconstructor:
         self._band = None
         self._band_count = wp.zeros(1, dtype=int, device=d)
         self._band_size = 0
+        self.graph = self.device.is_cuda if graph is None else bool(graph)
         if self.narrow_band is not None:
             self._band = wp.zeros(grid.size, dtype=int, device=d)
 
@@ -445,6 +451,25 @@ class Reconstructor:
             intersect: Recompute the ray intersections first (``False`` keeps the last ones:
                 the flow then descends the normal energy of a fixed set of intersections).
         """
+        if normal and smooth and points and intersect and self.graph:
+            key = (id(self.phi), self._band_size)
+            graph = self._graphs.get(key)
+            if graph is None:
+                if self.device.is_cpu:  # the band's size changed: older graphs are stale
+                    self._graphs.clear()
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._launch_step(True, True, True, True)
+                graph = self._graphs[key] = capture.graph
+            wp.capture_launch(graph)
+        else:
+            self._launch_step(normal, smooth, points, intersect)
+        self.phi, self._tmp = self._tmp, self.phi
+        self.iteration += 1
+        if self.reinit_every and self.iteration % self.reinit_every == 0:
+            self._reinitialize()
+
+    def _launch_step(self, normal: bool, smooth: bool, points: bool, intersect: bool) -> None:
+        """The launches of one iteration, from ``phi`` into its ping-pong twin."""
         if intersect:
             self._intersect()
         weights = {
@@ -461,10 +486,6 @@ class Reconstructor:
             launch_flow_step_band(self.phi, self._owner, self._normals, self._gauss,
                                   self._band, self._band_count, self._tmp,
                                   size=self._band_size, **weights)
-        self.phi, self._tmp = self._tmp, self.phi
-        self.iteration += 1
-        if self.reinit_every and self.iteration % self.reinit_every == 0:
-            self._reinitialize()
 
     def reinitialize(self) -> None:
         """Reset ``phi`` to the signed distance to its zero set now."""
