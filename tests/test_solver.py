@@ -179,3 +179,20 @@ def test_graph_replay_gives_the_launch_by_launch_result(octant, device):
         solver.run(25, measure_every=5)
         phis.append(solver.phi.numpy())
     np.testing.assert_array_equal(phis[0], phis[1])
+
+
+def test_a_non_finite_phi_stops_the_run_and_keeps_the_last_good_state(octant):
+    solver = ws.Reconstructor(octant, resolution=20, device="cpu")
+    solver.run(10, measure_every=5)
+    good = solver.phi.numpy()
+    solver.run(3, measure_every=0)
+    bad = solver.phi.numpy()
+    i, j, k = np.argwhere(np.abs(bad) < solver.grid.spacing)[0]
+    bad[i, j, k] = np.nan
+    solver.phi.assign(bad)
+    with pytest.raises(ws.ReconstructionError, match=r"^iteration 1[3-9]: phi has .* iteration 10"):
+        solver.run(5, measure_every=1)
+    assert solver.iteration == 10
+    np.testing.assert_array_equal(solver.phi.numpy(), good)
+    assert solver.history[-1]["iteration"] == 10
+    solver.run(2)  # and it can go on from there

@@ -329,6 +329,8 @@ class Reconstructor:
             self.phi.assign(wp.array(resumed, dtype=float, device=d))
         else:
             self._initialise(init_iterations)
+        self._good = wp.clone(self.phi)
+        self._good_iteration = 0
         self._rebuild_band()
         self._intersect()
 
@@ -435,8 +437,39 @@ class Reconstructor:
             self._band_size = self._band.shape[0]
 
     def _reinitialize(self) -> None:
+        """Check ``phi``, redistance it, rebuild the band and keep it as the last good state.
+
+        Raises:
+            ReconstructionError: If ``phi`` holds a non-finite value; the last good state is
+                restored first.
+        """
+        self._check_finite()
         self._redistancer.reinitialize(self.phi)
         self._rebuild_band()
+        wp.copy(self._good, self.phi)
+        self._good_iteration = self.iteration
+
+    def _reduce(self) -> np.ndarray:
+        launch_measures(self.phi, self._owner, self._normals, self._hits, self._active,
+                        self._points, self._sums, origin=self._origin, spacing=self.grid.spacing,
+                        band=self._band, count=self._band_count, size=self._band_size)
+        return self._sums.numpy()
+
+    def _check_finite(self, sums: np.ndarray | None = None) -> None:
+        sums = self._reduce() if sums is None else sums
+        bad = int(sums[MEASURE_SLOTS["nonfinite"]])
+        if bad == 0:
+            return
+        failed = self.iteration
+        wp.copy(self.phi, self._good)
+        wp.copy(self._tmp, self._good)
+        self.iteration = self._good_iteration
+        self.history = [m for m in self.history if m["iteration"] <= self.iteration]
+        self._rebuild_band()
+        raise ReconstructionError(
+            f"iteration {failed}: phi has {bad} non-finite values; the solver is back at the "
+            f"state of iteration {self._good_iteration}; lower cfl or point_weight"
+        )
 
     def step(
         self, *, normal: bool = True, smooth: bool = True, points: bool = True,
@@ -503,16 +536,8 @@ class Reconstructor:
         """
         if intersect:
             self._intersect()
-        launch_measures(self.phi, self._owner, self._normals, self._hits, self._active,
-                        self._points, self._sums, origin=self._origin, spacing=self.grid.spacing,
-                        band=self._band, count=self._band_count, size=self._band_size)
-        s = self._sums.numpy()
-        if s[MEASURE_SLOTS["nonfinite"]] > 0:
-            raise ReconstructionError(
-                f"iteration {self.iteration}: phi has {int(s[MEASURE_SLOTS['nonfinite']])} "
-                "non-finite values; "
-                "lower cfl or point_weight"
-            )
+        s = self._reduce()
+        self._check_finite(s)
         active = int(s[MEASURE_SLOTS["active"]])
         npts = max(self.scene.num_points, 1)
         e_n = float(s[MEASURE_SLOTS["energy_normal"]])
@@ -588,9 +613,9 @@ class Reconstructor:
         return Result(mesh=mesh, phi=phi, grid=self.grid, history=list(self.history), hits=hits)
 
 
-# Device bytes per voxel: phi, its ping-pong twin, G, owner and the narrow band's list (4 each),
-# and the redistancer's scratch (5, shared with the ownership pass).
-BYTES_PER_VOXEL = 25
+# Device bytes per voxel: phi, its ping-pong twin, the last good phi, G, owner and the narrow
+# band's list (4 each), and the redistancer's scratch (5, shared with the ownership pass).
+BYTES_PER_VOXEL = 29
 
 
 def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int = 300, **options) -> Result:
