@@ -87,6 +87,25 @@ def gaussian_splat(
         wp.atomic_add(gauss, n[0], n[1], n[2], wp.exp(-r2 / (2.0 * eps * eps)))
 
 
+@wp.func
+def ball_node(
+    x: wp.vec3, origin: wp.vec3, h: float, radius: float, span: int, offset: int,
+    shape: wp.vec3i,
+) -> wp.vec4:
+    """Node number ``offset`` of the window around ``x`` and its distance to ``x``.
+
+    Returns ``(i, j, k, d)``; ``d`` is negative when the node is off the grid or farther than
+    ``radius``.
+    """
+    n = window_node(x, origin, h, radius / h, span, offset)
+    if not inside(shape, n):
+        return wp.vec4(0.0, 0.0, 0.0, -1.0)
+    d = wp.length(node_position(origin, h, n[0], n[1], n[2]) - x)
+    if d > radius:
+        d = -1.0
+    return wp.vec4(float(n[0]), float(n[1]), float(n[2]), d)
+
+
 @wp.kernel
 def claim_distance(
     hits: wp.array[wp.vec3],
@@ -101,14 +120,10 @@ def claim_distance(
     r, offset = wp.tid()
     if active[r] == 0:
         return
-    x = hits[r]
-    n = window_node(x, origin, h, radius / h, span, offset)
     shape = wp.vec3i(dist.shape[0], dist.shape[1], dist.shape[2])
-    if not inside(shape, n):
-        return
-    d = wp.length(node_position(origin, h, n[0], n[1], n[2]) - x)
-    if d <= radius:
-        wp.atomic_min(dist, n[0], n[1], n[2], d)
+    b = ball_node(hits[r], origin, h, radius, span, offset, shape)
+    if b[3] >= 0.0:
+        wp.atomic_min(dist, int(b[0]), int(b[1]), int(b[2]), b[3])
 
 
 @wp.kernel
@@ -126,14 +141,15 @@ def claim_owner(
     r, offset = wp.tid()
     if active[r] == 0:
         return
-    x = hits[r]
-    n = window_node(x, origin, h, radius / h, span, offset)
     shape = wp.vec3i(dist.shape[0], dist.shape[1], dist.shape[2])
-    if not inside(shape, n):
+    b = ball_node(hits[r], origin, h, radius, span, offset, shape)
+    if b[3] < 0.0:
         return
-    d = wp.length(node_position(origin, h, n[0], n[1], n[2]) - x)
-    if d <= radius and d == dist[n[0], n[1], n[2]]:
-        wp.atomic_min(owner, n[0], n[1], n[2], r)
+    i = int(b[0])
+    j = int(b[1])
+    k = int(b[2])
+    if b[3] == dist[i, j, k]:
+        wp.atomic_min(owner, i, j, k, r)
 
 
 @wp.kernel
