@@ -5,6 +5,7 @@ smoothest surface through a few known points whose normals, where the specular r
 obey the law of reflection.
 """
 
+from .colmap import load_colmap
 from .errors import ReconstructionError, SceneError
 from .grid import Grid
 from .redistance import point_distance, redistance
@@ -23,6 +24,7 @@ __all__ = [
     "SceneError",
     "SceneWarning",
     "__version__",
+    "load_colmap",
     "point_distance",
     "reconstruct",
     "redistance",

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes.util
 import os
+import sys
 
 import warp as wp
 
@@ -21,8 +23,29 @@ def init() -> None:
         wp.config.kernel_cache_dir = cache
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no start-up banner, no per-module load lines
-    wp.init()
+    if ctypes.util.find_library("cuda") is None:
+        # No CUDA driver on this machine: Warp's native code would say so on stderr at every
+        # start; the CPU backend is all there is, which `warpspec info` reports.
+        with _quiet_stderr():
+            wp.init()
+    else:
+        wp.init()
     _initialised = True
+
+
+class _quiet_stderr:
+    """Point file descriptor 2 at /dev/null for the duration of a ``with`` block."""
+
+    def __enter__(self) -> None:
+        sys.stderr.flush()
+        self.saved = os.dup(2)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 2)
+        os.close(devnull)
+
+    def __exit__(self, *exc: object) -> None:
+        os.dup2(self.saved, 2)
+        os.close(self.saved)
 
 
 def resolve_device(device: str | wp.Device | None) -> wp.Device:

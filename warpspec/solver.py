@@ -23,6 +23,7 @@ from .grid import Grid
 from .initial import fit_height_field, plane_frame
 from .kernels.constraints import (
     launch_bend,
+    launch_blend,
     launch_claim_normals,
     launch_gaussian,
     launch_height_field,
@@ -92,10 +93,13 @@ def save_state(path: str | os.PathLike, phi: np.ndarray, grid: Grid) -> None:
     """Write ``phi`` and its grid to ``path`` (NPZ), through a temporary file and a rename."""
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
-    with open(tmp, "wb") as f:
-        np.savez_compressed(f, phi=phi, origin=grid.origin, spacing=grid.spacing,
-                            shape=np.asarray(grid.shape))
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, phi=phi, origin=grid.origin, spacing=grid.spacing,
+                                shape=np.asarray(grid.shape))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def load_state(path: str | os.PathLike) -> tuple[np.ndarray, Grid]:
@@ -314,6 +318,8 @@ class Reconstructor:
                                 device=d)
         self._sums = wp.zeros(NUM_SLOTS, dtype=wp.float64, device=d)
         self._redistancer = Redistancer(shape, h, d)
+        self._good = wp.zeros(shape, dtype=float, device=d)  # last good phi; scratch at start
+        self._good_iteration = 0
         # The ownership pass and the redistancer never run at once: they share a scratch field.
         self._owner_dist = self._redistancer.distance
         self._band = None
@@ -329,8 +335,7 @@ class Reconstructor:
             self.phi.assign(wp.array(resumed, dtype=float, device=d))
         else:
             self._initialise(init_iterations)
-        self._good = wp.clone(self.phi)
-        self._good_iteration = 0
+        wp.copy(self._good, self.phi)
         self._rebuild_band()
         self._intersect()
 
@@ -385,13 +390,15 @@ class Reconstructor:
         """Refine the start with a height field fitted to the points and the normals.
 
         The normals are taken where the rays meet the current start; the field is
-        re-intersected and refitted ``fit_iterations`` times.
+        re-intersected and refitted ``fit_iterations`` times, its degree rising from 2 (a
+        gentle quadric first: slopes read where the rays meet a poor start sit in the wrong
+        places, and a high degree overfits them).
         """
         frame = plane_frame(normal)
         scale = 0.5 * float(np.max(self.grid.upper - self.grid.origin))
         d = self.device
-        powers_np = None
-        for _ in range(self.fit_iterations):
+        previous, fitted = self._good, self._tmp
+        for round_ in range(self.fit_iterations):
             self._intersect()
             ok = self._active.numpy() == 1
             if ok.sum() < 3:
@@ -399,14 +406,26 @@ class Reconstructor:
             fit = fit_height_field(point, frame, scale, self.scene.points,
                                    self._hits.numpy()[ok].astype(np.float64),
                                    self._normals.numpy()[ok].astype(np.float64),
-                                   degree=self.fit_degree)
-            powers_np = fit.powers
+                                   degree=min(self.fit_degree, 2 + round_))
             launch_height_field(
-                self.phi, wp.array(fit.coeffs.astype(np.float32), dtype=float, device=d),
-                wp.array(powers_np, dtype=wp.vec2i, device=d), origin=self._origin,
+                fitted, wp.array(fit.coeffs.astype(np.float32), dtype=float, device=d),
+                wp.array(fit.powers, dtype=wp.vec2i, device=d), origin=self._origin,
                 spacing=self.grid.spacing, point=tuple(point),
                 axes=tuple(tuple(r) for r in frame), scale=scale)
-            self._redistancer.reinitialize(self.phi)
+            wp.copy(previous, self.phi)
+            # Damped fixed point: a fit made from intersections far from the truth can
+            # overshoot until the rays miss; halve the step until no ray is lost.
+            accepted = False
+            for beta in (1.0, 0.5, 0.25, 0.125):
+                launch_blend(previous, fitted, self.phi, beta=beta)
+                self._redistancer.reinitialize(self.phi)
+                self._intersect()
+                if self._active.numpy().sum() >= ok.sum():
+                    accepted = True
+                    break
+            if not accepted:
+                wp.copy(self.phi, previous)
+                break
 
     # -- iteration ------------------------------------------------------------------------
 

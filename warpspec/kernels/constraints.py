@@ -23,6 +23,7 @@ __all__ = [
     "GAUSSIAN_CUTOFF",
     "NO_OWNER",
     "launch_bend",
+    "launch_blend",
     "launch_claim_normals",
     "launch_gaussian",
     "launch_height_field",
@@ -229,6 +230,21 @@ def launch_height_field(
               inputs=[wp.vec3(*origin), float(spacing), wp.vec3(*point), wp.vec3(*axes[0]),
                       wp.vec3(*axes[1]), wp.vec3(*axes[2]), float(scale), coeffs, powers],
               outputs=[phi], device=phi.device)
+
+
+@wp.kernel
+def blend_fields(
+    a: wp.array3d[float], b: wp.array3d[float], beta: float, out: wp.array3d[float]
+):
+    """``out = a + beta (b - a)``."""
+    i, j, k = wp.tid()
+    out[i, j, k] = a[i, j, k] + beta * (b[i, j, k] - a[i, j, k])
+
+
+def launch_blend(a: wp.array, b: wp.array, out: wp.array, *, beta: float) -> None:
+    """Write ``a + beta (b - a)`` into ``out`` (which may alias ``a`` or ``b``)."""
+    wp.launch(blend_fields, dim=a.shape, inputs=[a, b, float(beta)], outputs=[out],
+              device=a.device)
 
 
 def window_span(radius_in_cells: float) -> int:
