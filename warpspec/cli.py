@@ -1,27 +1,55 @@
 """The ``warpspec`` command line: a thin layer over the Python API.
 
-Errors in the input are reported as one line on standard error with exit status 2; a run
-that fails for another reason (a non-finite level set, no surface) exits with status 1.
+Errors in the input (a scene field, an argument, a file) are reported as one line on standard
+error with exit status 2, before any work is done; a run that fails for another reason (a
+non-finite level set, no surface, a file that cannot be written) exits with status 1, and an
+interrupted one with 130. Legal but suspicious input is reported as one ``warning:`` line each.
+
+Outputs are written to temporary files next to their targets and renamed only when all of them
+are complete, so an interrupted or failed run leaves no partial file behind.
+
+COLMAP models enter through their own subcommand, ``warpspec import-colmap``, which writes a
+scene file for ``warpspec reconstruct``: the scene file stays the one input of the solver, the
+import's options and warnings (lens distortion, dropped points) are dealt with once, and the
+scene can be inspected and edited (a domain box, fewer points) before a run.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
+import glob
 import json
 import math
 import os
 import sys
 import time
-from collections.abc import Sequence
+import traceback
+import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .errors import ReconstructionError, SceneError
 
-__all__ = ["main"]
+__all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"]
 
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
 METRIC_FORMATS = (".csv", ".json")
+PICTURE_FORMATS = (".png", ".pdf", ".svg")
+SCENE_FORMATS = (".json",)
+
+# Names of Python options in the API's messages and the flags that set them.
+_FLAGS = {
+    "alpha": "--alpha",
+    "bulge": "--bulge",
+    "bulge_cap": "--bulge-cap",
+    "reinit_every": "--reinit-every",
+    "resolution": "--resolution",
+    "iterations": "--iterations",
+    "device": "--device",
+    "resume": "--resume",
+}
 
 
 def _version() -> str:
@@ -30,39 +58,71 @@ def _version() -> str:
     return __version__
 
 
-def atomic_write(path: Path, write) -> None:
+# --------------------------------------------------------------------------------------------
+# Writing outputs
+
+
+def _temp_path(path: Path) -> Path:
+    """A hidden temporary name next to ``path`` that keeps its extension."""
+    return path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
+
+
+def _remove_temps(tmp: Path) -> None:
+    """Remove ``tmp`` and anything a writer derived from its name (``tmp.part``...)."""
+    pattern = glob.escape(str(tmp.with_suffix(""))) + "*"
+    for name in glob.glob(pattern):
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+
+
+def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp_path)`` then rename the temporary file onto ``path``.
 
-    An interrupted run never leaves a half-written file at ``path``.
+    An interrupted run never leaves a half-written file at ``path``, nor a temporary file.
     """
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
+    path = Path(path)
+    tmp = _temp_path(path)
     try:
         write(tmp)
         os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        _remove_temps(tmp)
 
 
-def _suffix(path: str, allowed: Sequence[str], flag: str) -> Path:
-    p = Path(path)
-    if p.suffix.lower() not in allowed:
-        raise SceneError(
-            f"{flag}: {path!r} has an unsupported extension; use one of {', '.join(allowed)}"
-        )
-    if not p.parent.exists():
-        raise SceneError(f"{flag}: the folder {str(p.parent)!r} does not exist")
-    return p
+class _Outputs:
+    """Outputs written to temporary files, then renamed together (or all discarded)."""
+
+    def __init__(self) -> None:
+        self.staged: list[tuple[Path, Path]] = []
+
+    def stage(self, path: Path, write: Callable[[Path], object]) -> None:
+        tmp = _temp_path(path)
+        self.staged.append((tmp, path))
+        try:
+            write(tmp)
+        except OSError as exc:
+            raise ReconstructionError(
+                f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+        if not tmp.exists():
+            raise ReconstructionError(f"cannot write {str(path)!r}: the writer made no file")
+
+    def commit(self) -> None:
+        for tmp, path in self.staged:
+            os.replace(tmp, path)
+        self.staged.clear()
+
+    def discard(self) -> None:
+        for tmp, _ in self.staged:
+            _remove_temps(tmp)
+        self.staged.clear()
 
 
-def write_metrics(path: Path, history: list[dict]) -> None:
-    """Write the per-iteration measures as CSV or JSON (by the file's extension)."""
-
+def _metrics_writer(history: list[dict], suffix: str) -> Callable[[Path], None]:
     def clean(v):
         return None if isinstance(v, float) and not math.isfinite(v) else v
 
     def write(tmp: Path) -> None:
-        if path.suffix.lower() == ".json":
+        if suffix == ".json":
             rows = [{k: clean(v) for k, v in row.items()} for row in history]
             tmp.write_text(json.dumps(rows, indent=1) + "\n")
         else:
@@ -71,32 +131,108 @@ def write_metrics(path: Path, history: list[dict]) -> None:
                 writer.writeheader()
                 writer.writerows(history)
 
-    atomic_write(path, write)
+    return write
+
+
+def write_metrics(path: Path, history: list[dict]) -> None:
+    """Write the per-iteration measures as CSV or JSON (by the file's extension), atomically."""
+    path = Path(path)
+    atomic_write(path, _metrics_writer(history, path.suffix.lower()))
+
+
+def _mesh_writer(mesh, suffix: str) -> Callable[[Path], None]:
+    return lambda tmp: mesh.export(tmp, file_type=suffix[1:])
 
 
 def write_mesh(path: Path, mesh) -> None:
     """Export a mesh in the format its extension names, atomically."""
-    atomic_write(path, lambda tmp: mesh.export(tmp, file_type=path.suffix.lower()[1:]))
+    path = Path(path)
+    atomic_write(path, _mesh_writer(mesh, path.suffix.lower()))
+
+
+# --------------------------------------------------------------------------------------------
+# Checking arguments
+
+
+def _output(path: str, allowed: Sequence[str], flag: str) -> Path:
+    """An output path with a known extension in a folder that exists and can be written."""
+    p = Path(path)
+    if p.suffix.lower() not in allowed:
+        raise SceneError(
+            f"{flag}: {path!r} has an unsupported extension; use one of {', '.join(allowed)}"
+        )
+    parent = p.parent
+    if not parent.is_dir():
+        raise SceneError(f"{flag}: the folder {str(parent)!r} does not exist")
+    if p.is_dir():
+        raise SceneError(f"{flag}: {path!r} is a folder, expected a file name")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SceneError(f"{flag}: the folder {str(parent)!r} is not writable")
+    return p
+
+
+def _distinct(outputs: dict[str, Path | None]) -> None:
+    seen: dict[Path, str] = {}
+    for flag, path in outputs.items():
+        if path is None:
+            continue
+        key = path.resolve()
+        if key in seen:
+            raise SceneError(f"{flag}: {str(path)!r} is also the file of {seen[key]}")
+        seen[key] = flag
+
+
+def _input_file(path: str, flag: str) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise SceneError(f"{flag}: no such file {path!r}")
+    if p.is_dir():
+        hint = ""
+        if (p / "cameras.txt").exists() or (p / "cameras.bin").exists():
+            hint = "; for a COLMAP model, make a scene file with 'warpspec import-colmap' first"
+        raise SceneError(f"{flag}: {path!r} is a folder, expected a file{hint}")
+    return p
+
+
+def _flag_message(exc: SceneError) -> SceneError:
+    """Name the command-line flag instead of the Python option in an API message."""
+    text = str(exc)
+    name, sep, rest = text.partition(":")
+    if sep and name in _FLAGS:
+        return SceneError(f"{_FLAGS[name]}:{rest}")
+    return exc
+
+
+# --------------------------------------------------------------------------------------------
+# Progress and messages
 
 
 class _Progress:
-    """A progress bar over iterations (tqdm), or nothing when quiet or not on a terminal."""
+    """A progress bar over iterations (tqdm), or nothing when quiet or not on a terminal.
+
+    The bar appears only once a run has lasted a second.
+    """
 
     def __init__(self, total: int, enabled: bool) -> None:
         self.bar = None
         if enabled:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=total, unit="it", file=sys.stderr, leave=True)
+            self.bar = tqdm(total=total, unit="it", file=sys.stderr, leave=True, delay=1.0,
+                            dynamic_ncols=True)
+        self.first = None
         self.last = 0
 
     def __call__(self, m: dict) -> None:
         if self.bar is None:
             return
+        if self.first is None:
+            self.first = m["iteration"]
+            self.last = m["iteration"]
         self.bar.update(m["iteration"] - self.last)
         self.last = m["iteration"]
-        self.bar.set_postfix(normal=f"{m['normal_error']:.4f}",
-                             point=f"{m['point_error']:.3f}h", misses=m["misses"],
+        self.bar.set_postfix({"normal": f"{m['normal_error']:.4f}",
+                              "point": f"{m['point_error']:.3f}h", "misses": m["misses"]},
                              refresh=False)
 
     def close(self) -> None:
@@ -104,29 +240,100 @@ class _Progress:
             self.bar.close()
 
 
-def _cmd_reconstruct(args: argparse.Namespace) -> int:
-    from .scene import Scene
-    from .solver import Reconstructor
+def _say(text: str) -> None:
+    print(f"warpspec: {text}", file=sys.stderr)
 
-    out = _suffix(args.output, MESH_FORMATS, "--output")
-    metrics = _suffix(args.metrics, METRIC_FORMATS, "--metrics") if args.metrics else None
-    save_phi = _suffix(args.save_phi, (".npz",), "--save-phi") if args.save_phi else None
-    if args.crop not in (None, "hull"):
-        raise SceneError(f"--crop: unknown crop {args.crop!r}; use 'hull'")
-    scene = Scene.load(args.scene)
+
+@contextlib.contextmanager
+def _warnings_as_lines(quiet: bool):
+    """Show each warning at once as one ``warpspec: warning: ...`` line (none when quiet)."""
+    seen: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        if text not in seen:
+            seen.add(text)
+            _say(f"warning: {text}")
+
+    with warnings.catch_warnings():
+        if quiet:
+            warnings.simplefilter("ignore")
+        warnings.showwarning = show
+        yield
+
+
+def _constraint_normals(scene, hits):
+    """The normals the reflection law demands at the ray intersections (NaN where missed)."""
+    import numpy as np
+
+    if hits is None or scene.num_specularities == 0:
+        return None
+    hits = np.asarray(hits, dtype=np.float64)
+    ok = np.all(np.isfinite(hits), axis=1)
+    origins, dirs = scene.rays()
+    where = np.where(ok[:, None], hits, origins + dirs)  # any finite stand-in for a miss
+    normals = scene.normals(where)
+    normals[~ok] = np.nan
+    return normals
+
+
+def _fmt(value: float, spec: str) -> str:
+    return "n/a" if not math.isfinite(value) else format(value, spec)
+
+
+# --------------------------------------------------------------------------------------------
+# Subcommands
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    # Every argument is checked before the scene is read, and the scene before any work.
+    out = _output(args.output, MESH_FORMATS, "--output")
+    metrics = _output(args.metrics, METRIC_FORMATS, "--metrics") if args.metrics else None
+    save_phi = _output(args.save_phi, (".npz",), "--save-phi") if args.save_phi else None
+    render = _output(args.render, PICTURE_FORMATS, "--render") if args.render else None
+    plot = _output(args.plot, PICTURE_FORMATS, "--plot") if args.plot else None
+    _distinct({"--output": out, "--metrics": metrics, "--save-phi": save_phi,
+               "--render": render, "--plot": plot})
+    resume = _input_file(args.resume, "--resume") if args.resume else None
+    if render is not None or plot is not None:
+        from .plots import require_matplotlib
+
+        require_matplotlib("--render" if render is not None else "--plot")
+    if resume is not None and args.resolution is not None:
+        warnings.warn("--resolution is ignored with --resume: the saved grid is used",
+                      stacklevel=1)
+    scene_path = _input_file(args.scene, "scene")
+
+    from .scene import Scene
+
+    scene = Scene.load(scene_path)
+    constraints = scene.num_points + scene.num_specularities
+    if args.crop == "hull" and constraints < 3:
+        raise SceneError("--crop: the hull needs at least 3 constraints (points and "
+                         f"specularities), the scene has {constraints}")
     if not args.quiet:
         scene.check()
-    start = time.perf_counter()
-    solver = Reconstructor(
-        scene,
-        resolution=args.resolution,
-        alpha=args.alpha,
-        bulge=args.bulge,
-        bulge_cap=args.bulge_cap,
-        device=args.device,
-        reinit_every=args.reinit_every,
-        resume=args.resume,
-    )
+
+    from ._runtime import resolve_device
+
+    try:
+        device = resolve_device(args.device)
+        from .solver import Reconstructor
+
+        start = time.perf_counter()
+        solver = Reconstructor(
+            scene,
+            resolution=64 if args.resolution is None else args.resolution,
+            alpha=args.alpha,
+            bulge=args.bulge,
+            bulge_cap=args.bulge_cap,
+            device=device,
+            reinit_every=args.reinit_every,
+            resume=resume,
+        )
+    except SceneError as exc:
+        raise _flag_message(exc) from None
+
     progress = _Progress(args.iterations, enabled=not args.quiet and sys.stderr.isatty())
     try:
         solver.run(args.iterations, measure_every=1, callback=progress)
@@ -137,20 +344,82 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     if args.crop == "hull":
         from .mesh import crop_to_hull
 
-        mesh = crop_to_hull(mesh, result.constraint_anchors(scene))
-    write_mesh(out, mesh)
-    if metrics is not None:
-        write_metrics(metrics, result.history)
-    if save_phi is not None:
-        result.save_phi(save_phi)
+        try:
+            mesh = crop_to_hull(mesh, result.constraint_anchors(scene))
+        except (SceneError, ReconstructionError) as exc:
+            raise ReconstructionError(f"--crop hull: {exc}") from None
+
+    outputs = _Outputs()
+    try:
+        outputs.stage(out, _mesh_writer(mesh, out.suffix.lower()))
+        if metrics is not None:
+            outputs.stage(metrics, _metrics_writer(result.history, metrics.suffix.lower()))
+        if save_phi is not None:
+            outputs.stage(save_phi, result.save_phi)
+        if render is not None:
+            from .plots import render_mesh
+
+            normals = _constraint_normals(scene, result.hits)
+            outputs.stage(render, lambda tmp: render_mesh(
+                mesh, tmp, points=scene.points, hits=result.hits, normals=normals,
+                cameras=scene.camera_centres(),
+                title=f"{Path(args.scene).name}: {len(mesh.faces)} faces"
+                      f"{' (cropped to the hull)' if args.crop else ''}"))
+        if plot is not None:
+            from .plots import plot_history
+
+            outputs.stage(plot, lambda tmp: plot_history(
+                result.history, tmp, title=f"{Path(args.scene).name}: convergence"))
+        outputs.commit()
+    finally:
+        outputs.discard()
+
+    last = result.history[-1]
     if not args.quiet:
-        last = result.history[-1]
-        print(
+        if last["misses"]:
+            _say(f"warning: {last['misses']} of {scene.num_specularities} specular rays miss "
+                 "the final surface; their normals were not used")
+        _say(
             f"wrote {out} ({len(mesh.faces)} faces) in {time.perf_counter() - start:.1f} s: "
-            f"normal error {last['normal_error']:.4g}, point error {last['point_error']:.3g} "
-            f"voxel, {last['misses']} missed rays",
-            file=sys.stderr,
+            f"normal error {_fmt(last['normal_error'], '.4g')}, point error "
+            f"{_fmt(last['point_error'], '.3g')} voxel, {last['misses']} missed rays"
         )
+    return 0
+
+
+def _cmd_import_colmap(args: argparse.Namespace) -> int:
+    out = _output(args.output, SCENE_FORMATS, "--output")
+    from .colmap import import_colmap, parse_light
+
+    light = parse_light(args.light, field="--light") if args.light is not None else None
+    domain = None
+    if args.domain is not None:
+        v = args.domain
+        domain = (v[:3], v[3:])
+    imported = import_colmap(
+        args.model, args.highlights, light=light, points=args.points,
+        max_points=args.max_points, domain=domain, pixel_convention=args.pixel_convention,
+    )
+    scene = imported.scene
+    data = scene.to_dict()
+    data["_source"] = {
+        "colmap_model": str(Path(args.model).resolve()),
+        "highlights": None if args.highlights is None else str(Path(args.highlights).resolve()),
+        "pixel_convention": args.pixel_convention,
+    }
+    data["_images"] = list(imported.image_names)
+    data["_point_ids"] = list(imported.point_ids)
+    text = json.dumps(data, indent=1, allow_nan=False) + "\n"
+    outputs = _Outputs()
+    try:
+        outputs.stage(out, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        outputs.commit()
+    finally:
+        outputs.discard()
+    if not args.quiet:
+        scene.check()
+        _say(f"wrote {out}: {scene.num_cameras} cameras, {scene.num_specularities} "
+             f"specularities, {scene.num_points} points")
     return 0
 
 
@@ -166,7 +435,16 @@ def _cmd_info(args: argparse.Namespace) -> int:
         extra = f", {d.total_memory / 2**30:.1f} GiB" if d.is_cuda else ""
         print(f"device {d.alias}: {d.name}{extra}")
     print(f"kernel cache {wp.config.kernel_cache_dir}")
+    try:
+        from matplotlib import __version__ as mpl
+    except ImportError:
+        mpl = "not installed (pip install 'warpspec[plot]' for --render and --plot)"
+    print(f"matplotlib {mpl}")
     return 0
+
+
+# --------------------------------------------------------------------------------------------
+# Argument types and the parser
 
 
 def _positive_int(text: str) -> int:
@@ -176,6 +454,17 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
     return value
 
 
@@ -189,9 +478,41 @@ def _finite(text: str) -> float:
     return value
 
 
+def _non_negative(text: str) -> float:
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return value
+
+
+def _points_choice(text: str) -> str | list[int]:
+    if text in ("all", "none"):
+        return text
+    try:
+        return [int(p) for p in text.split(",") if p.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected 'all', 'none' or POINT3D_IDs like 12,40,41, got {text!r}") from None
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line: ``prog: error: message (see --help)``."""
+
+    def error(self, message: str):
+        text = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {text} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``warpspec`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="warpspec",
         description="Reconstruct shiny surfaces from sparse points and specular highlights.",
     )
@@ -200,40 +521,74 @@ def build_parser() -> argparse.ArgumentParser:
 
     rec = sub.add_parser("reconstruct", help="reconstruct a surface mesh from a scene file",
                          description="Reconstruct a surface mesh from a scene file.")
-    rec.add_argument("scene", help="scene file (JSON, version 1)")
+    rec.add_argument("scene", help="scene file (JSON, version 1); make one from a COLMAP "
+                                   "model with 'warpspec import-colmap'")
     rec.add_argument("-o", "--output", required=True,
                      help=f"mesh to write; format by extension ({', '.join(MESH_FORMATS)})")
-    rec.add_argument("--resolution", type=_positive_int, default=64,
+    rec.add_argument("--resolution", type=_positive_int, default=None,
                      help="cells along the longest side of the domain (default 64)")
     rec.add_argument("--iterations", type=_positive_int, default=300,
                      help="iterations of the flow (default 300)")
-    rec.add_argument("--alpha", type=_finite, default=0.01,
+    rec.add_argument("--alpha", type=_non_negative, default=0.01,
                      help="weight of the smoothness term (default 0.01)")
     rec.add_argument("--bulge", type=_finite, default=0.0,
                      help="bend the initial plane toward the cameras by this times the "
                           "distance to the nearest point (default 0)")
-    rec.add_argument("--bulge-cap", type=_finite, default=None,
+    rec.add_argument("--bulge-cap", type=_positive, default=None,
                      help="cap on that distance, in voxel widths (default: none)")
-    rec.add_argument("--reinit-every", type=int, default=10,
-                     help="reinitialise to a signed distance every N iterations (default 10)")
+    rec.add_argument("--reinit-every", type=_non_negative_int, default=10,
+                     help="reinitialise to a signed distance every N iterations, 0 never "
+                          "(default 10)")
     rec.add_argument("--device", default=None,
                      help="Warp device: cpu, cuda, cuda:0 (default: CUDA if present)")
     rec.add_argument("--metrics", default=None,
                      help="write the per-iteration measures (.csv or .json)")
     rec.add_argument("--save-phi", default=None, help="keep the level set and its grid (.npz)")
     rec.add_argument("--resume", default=None, help="continue from a level set saved with "
-                                                    "--save-phi")
+                                                    "--save-phi (its grid is used)")
     rec.add_argument("--crop", default=None, choices=["hull"],
                      help="keep only the faces inside the hull of the constraints")
+    rec.add_argument("--render", default=None, metavar="FILE.png",
+                     help="draw views of the mesh with the constraint points and normals "
+                          "(needs matplotlib)")
+    rec.add_argument("--plot", default=None, metavar="FILE.png",
+                     help="draw the convergence curves (needs matplotlib)")
     rec.add_argument("--quiet", action="store_true", help="print nothing but errors")
     rec.set_defaults(func=_cmd_reconstruct)
+
+    imp = sub.add_parser(
+        "import-colmap", help="make a scene file from a COLMAP text model and highlights",
+        description="Make a scene file from a COLMAP text model (cameras.txt, images.txt, "
+                    "points3D.txt) and a CSV of highlights (image,u,v rows; by default in "
+                    "COLMAP's pixel convention, where the centre of the top-left pixel is "
+                    "(0.5, 0.5)). Every registered image becomes a camera, in IMAGE_ID order.")
+    imp.add_argument("model", help="folder of the COLMAP text model")
+    imp.add_argument("--highlights", default=None, metavar="CSV",
+                     help="CSV of highlights: image name, u, v (header optional)")
+    imp.add_argument("--light", default=None, metavar="SPEC",
+                     help="the light, in the model's frame: camera, directional:X,Y,Z (toward "
+                          "the light), point:X,Y,Z, or a JSON object")
+    imp.add_argument("-o", "--output", required=True, help="scene file to write (.json)")
+    imp.add_argument("--points", type=_points_choice, default="all",
+                     help="3D points to use as constraints: all, none, or POINT3D_IDs "
+                          "12,40,41 (default all)")
+    imp.add_argument("--max-points", type=_non_negative_int, default=None,
+                     help="keep at most this many points, those of least reprojection error")
+    imp.add_argument("--domain", type=_finite, nargs=6, default=None,
+                     metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+                     help="box to reconstruct in; points outside it are dropped")
+    imp.add_argument("--pixel-convention", choices=["colmap", "index"], default="colmap",
+                     help="colmap: top-left pixel centre at (0.5, 0.5) (default); index: at "
+                          "(0, 0), as OpenCV and NumPy row/column indices")
+    imp.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    imp.set_defaults(func=_cmd_import_colmap)
 
     from .cli_tools import add_parsers
 
     add_parsers(sub)
 
     info = sub.add_parser("info", help="versions, devices and the kernel cache location")
-    info.set_defaults(func=_cmd_info)
+    info.set_defaults(func=_cmd_info, quiet=False)
     return parser
 
 
@@ -244,15 +599,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv: Arguments without the program name (default: ``sys.argv[1:]``).
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a bad argument (already reported)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    try:
+        with _warnings_as_lines(getattr(args, "quiet", False)):
+            return args.func(args)
     except SceneError as exc:
-        print(f"warpspec: error: {exc}", file=sys.stderr)
+        _say(f"error: {' '.join(str(exc).split())}")
         return 2
     except ReconstructionError as exc:
-        print(f"warpspec: failed: {exc}", file=sys.stderr)
+        _say(f"failed: {' '.join(str(exc).split())}")
         return 1
     except KeyboardInterrupt:
-        print("warpspec: interrupted; no output was written", file=sys.stderr)
+        _say("interrupted; no output was written")
         return 130
+    except OSError as exc:
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        _say(f"failed:{where} {exc.strerror or exc}")
+        return 1
+    except Exception as exc:  # a bug: one line, and the traceback only when asked for
+        if os.environ.get("WARPSPEC_DEBUG"):
+            traceback.print_exc()
+        _say(f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
+             "(this is a bug in warpspec; set WARPSPEC_DEBUG=1 for the traceback)")
+        return 1
