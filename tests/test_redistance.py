@@ -137,6 +137,13 @@ def test_serial_and_planes_agree(device):
     for serial, planes in zip(*results, strict=True):
         np.testing.assert_allclose(serial, planes, rtol=0, atol=1e-6)
     np.testing.assert_allclose(results[1][1], redistance(phi, h, device=device), atol=1e-6)
+    # a box that is not a cube: the planes are clipped differently on each axis
+    shape = (20, 33, 27)
+    xyz = np.stack(np.meshgrid(*[np.arange(s) * h for s in shape], indexing="ij"), axis=-1)
+    phi = np.linalg.norm(xyz - [0.25, 0.6, 0.3], axis=-1) - 0.2
+    serial = redistance(phi, h, device=device, method="serial")
+    planes = redistance(phi, h, device=device, method="planes")
+    np.testing.assert_allclose(serial, planes, rtol=0, atol=1e-6)
 
 
 def test_scaled_plane_is_restored_to_exact_distance(device):
@@ -276,3 +283,23 @@ def test_bad_arguments_raise_scene_error_naming_them(call, name):
     with pytest.raises(SceneError, match=rf"^{name}: ") as info:
         call()
     assert "\n" not in str(info.value)
+
+
+def test_redistancer_checks_its_arguments(device):
+    with pytest.raises(SceneError, match=r"^method: "):
+        Redistancer((4, 4, 4), 0.1, device, method="fast")
+    with pytest.raises(SceneError, match=r"^band: "):
+        Redistancer((4, 4, 4), 0.1, device, band="exact")
+    with pytest.raises(SceneError, match=r"^passes: "):
+        Redistancer((4, 4, 4), 0.1, device, passes=0)
+    rd = Redistancer((4, 4, 4), 0.1, device)
+    with pytest.raises(SceneError, match=r"^phi: expected shape"):
+        rd.reinitialize(wp.zeros((4, 4, 5), dtype=float, device=device))
+    with pytest.raises(SceneError, match=r"^phi: expected float32"):
+        rd.reinitialize(wp.zeros((4, 4, 4), dtype=wp.float64, device=device))
+    with pytest.raises(SceneError, match=r"^points: "):
+        rd.point_distance(
+            wp.zeros(3, dtype=float, device=device),
+            (0.0, 0.0, 0.0),
+            wp.zeros((4, 4, 4), dtype=float, device=device),
+        )

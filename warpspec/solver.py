@@ -42,6 +42,8 @@ from .scene import Scene
 
 __all__ = ["Reconstructor", "Result", "reconstruct"]
 
+REINIT_BAND = "gradient"
+
 MEASURE_KEYS = (
     "iteration",
     "normal_error",
@@ -317,7 +319,7 @@ class Reconstructor:
         self._points = wp.array(scene.points.astype(np.float32).reshape(-1, 3), dtype=wp.vec3,
                                 device=d)
         self._sums = wp.zeros(NUM_SLOTS, dtype=wp.float64, device=d)
-        self._redistancer = Redistancer(shape, h, d)
+        self._redistancer = Redistancer(shape, h, d, band=REINIT_BAND)
         self._good = wp.zeros(shape, dtype=float, device=d)  # last good phi; scratch at start
         self._good_iteration = 0
         # The ownership pass and the redistancer never run at once: they share a scratch field.

@@ -2,20 +2,30 @@
 
 Distances are computed in index units (``h = 1``) in a scratch array and scaled by the spacing
 only when written back, so the sweeps never see the spacing. Two ways to run the sweeps share
-one Godunov update:
+one node update (:func:`_visit`):
 
 - ``serial``: one thread does the 8 Gauss-Seidel sweeps of Zhao (2005) in order; the fastest on
   the CPU backend, which runs a launch serially anyway.
 - ``planes``: the parallel sweeps of Detrixhe, Gibou and Min (2013): for each of the 8
   orderings, one launch per plane ``i' + j' + k' = L`` of the ordering's flipped coordinates.
-  A node's Godunov update reads only its 6 axis neighbours; the 3 upwind ones lie on plane
-  ``L - 1`` (already swept) and the 3 downwind ones on plane ``L + 1`` (not yet swept), exactly
-  as in the serial lexicographic order, so both methods give the same numbers.
+  A node's update reads only its 6 axis neighbours; the 3 upwind ones lie on plane ``L - 1``
+  (already swept) and the 3 downwind ones on plane ``L + 1`` (not yet swept), exactly as in
+  the serial lexicographic order, so both methods give the same numbers. A thread writes only
+  its own node and sets the "active" bit of its neighbours (on planes ``L +- 1``, which no
+  thread of the launch clears), so a launch is race-free in any thread order.
+
+A node is updated only while "active" (a neighbour changed since its last update: the locking
+of Bak, McLaughlin and Renzi 2010), which skips most of the work of the later sweeps without
+changing the result. The distance to a point set uses the same sweeps, passing each node the
+nearest of its neighbours' nearest points (closest-point sweeping) instead of the Godunov
+update.
 """
 
 from __future__ import annotations
 
 import warp as wp
+
+from ..errors import SceneError
 
 wp.set_module_options({"enable_backward": False})
 
@@ -69,14 +79,34 @@ def _point_distance(pts: PointSet, q: int, g: wp.vec3) -> float:
 
 
 @wp.func
-def _godunov(d: wp.array3d[float], i: int, j: int, k: int) -> float:
-    """Godunov upwind solution of |grad d| = 1 (h = 1) from the 6 axis neighbours (clamped)."""
+def _mark(flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
+    """Mark one node active (the flag byte is only ever or-ed with the same bit meanwhile)."""
+    flags[i, j, k] = flags[i, j, k] | wp.uint8(_ACTIVE)
+
+
+@wp.func
+def _visit_distance(d: wp.array3d[float], flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
+    """Godunov update of |grad d| = 1 (h = 1) at one node; wake the neighbours it may lower.
+
+    The 6 axis neighbours are clamped at the border (the same as one-sided there). A neighbour
+    whose value is not above the new one cannot use it as an upwind value, so it is not woken.
+    """
     nx = d.shape[0]
     ny = d.shape[1]
     nz = d.shape[2]
-    a = wp.min(d[wp.max(i - 1, 0), j, k], d[wp.min(i + 1, nx - 1), j, k])
-    b = wp.min(d[i, wp.max(j - 1, 0), k], d[i, wp.min(j + 1, ny - 1), k])
-    c = wp.min(d[i, j, wp.max(k - 1, 0)], d[i, j, wp.min(k + 1, nz - 1)])
+    xm = d[wp.max(i - 1, 0), j, k]
+    xp = d[wp.min(i + 1, nx - 1), j, k]
+    ym = d[i, wp.max(j - 1, 0), k]
+    yp = d[i, wp.min(j + 1, ny - 1), k]
+    zm = d[i, j, wp.max(k - 1, 0)]
+    zp = d[i, j, wp.min(k + 1, nz - 1)]
+    old = d[i, j, k]
+    a = wp.min(xm, xp)
+    b = wp.min(ym, yp)
+    c = wp.min(zm, zp)
+    # the update is at least min + 1/sqrt(3): nothing to do if that is not below the value
+    if wp.min(a, wp.min(b, c)) + 0.5773 >= old:
+        return
     # sort a <= b <= c
     if a > b:
         t = a
@@ -99,7 +129,21 @@ def _godunov(d: wp.array3d[float], i: int, j: int, k: int) -> float:
         if u > c:
             s = b + c
             u = (s + wp.sqrt(wp.max(s * s - 3.0 * (b * b + c * c - 1.0), 0.0))) / 3.0
-    return a + u
+    u = a + u
+    if u < old:
+        d[i, j, k] = u
+        if i > 0 and xm > u:
+            _mark(flags, i - 1, j, k)
+        if i < nx - 1 and xp > u:
+            _mark(flags, i + 1, j, k)
+        if j > 0 and ym > u:
+            _mark(flags, i, j - 1, k)
+        if j < ny - 1 and yp > u:
+            _mark(flags, i, j + 1, k)
+        if k > 0 and zm > u:
+            _mark(flags, i, j, k - 1)
+        if k < nz - 1 and zp > u:
+            _mark(flags, i, j, k + 1)
 
 
 @wp.func
@@ -149,12 +193,6 @@ def _nearest_update(pts: PointSet, i: int, j: int, k: int) -> bool:
 
 
 @wp.func
-def _mark(flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
-    """Mark one node active (the flag byte is only ever or-ed with the same bit meanwhile)."""
-    flags[i, j, k] = flags[i, j, k] | wp.uint8(_ACTIVE)
-
-
-@wp.func
 def _visit(
     d: wp.array3d[float],
     flags: wp.array3d[wp.uint8],
@@ -164,24 +202,18 @@ def _visit(
     j: int,
     k: int,
 ):
-    """Update an active, unfrozen node and wake its neighbours if it changed.
+    """Update an active, unfrozen node (mode 0: distance ``d``; 1: nearest point of ``pts``).
 
-    Mode 0: Godunov update of the distance ``d``; mode 1: nearest point of ``pts``. Reads the
-    node's 6 axis neighbours and writes only the node and its neighbours' active bits.
+    Reads the node and its 6 axis neighbours; writes only the node and its neighbours' active
+    bits (to wake them for the next visit).
     """
     f = int(flags[i, j, k])
     if (f & (_ACTIVE + _FROZEN)) != _ACTIVE:
         return
     flags[i, j, k] = wp.uint8(f - _ACTIVE)
-    changed = wp.bool(False)
     if mode == 0:
-        u = _godunov(d, i, j, k)
-        if u < d[i, j, k]:
-            d[i, j, k] = u
-            changed = True
-    else:
-        changed = _nearest_update(pts, i, j, k)
-    if changed:
+        _visit_distance(d, flags, i, j, k)
+    elif _nearest_update(pts, i, j, k):
         if i > 0:
             _mark(flags, i - 1, j, k)
         if i < flags.shape[0] - 1:
@@ -217,6 +249,10 @@ def _band_distance(phi: wp.array3d[float], i: int, j: int, k: int, mode: int) ->
     pyp = phi[i, jp, k]
     pzm = phi[i, j, km]
     pzp = phi[i, j, kp]
+    lo = wp.min(wp.min(wp.min(pxm, pxp), wp.min(pym, pyp)), wp.min(pzm, pzp))
+    hi = wp.max(wp.max(wp.max(pxm, pxp), wp.max(pym, pyp)), wp.max(pzm, pzp))
+    if (p > 0.0 and lo >= 0.0) or (p < 0.0 and hi < 0.0):
+        return BIG  # no sign change: most nodes
     dx = wp.min(_crossing(p, pxm), _crossing(p, pxp))
     dy = wp.min(_crossing(p, pym), _crossing(p, pyp))
     dz = wp.min(_crossing(p, pzm), _crossing(p, pzp))
@@ -420,7 +456,7 @@ class Redistancer:
         passes: How many times the 8 sweeps are repeated.
 
     Raises:
-        ValueError: If ``method`` or ``band`` is unknown, ``passes`` is below 1, ``spacing`` is
+        SceneError: If ``method`` or ``band`` is unknown, ``passes`` is below 1, ``spacing`` is
             not positive or ``shape`` is not 3 positive sizes.
     """
 
@@ -436,15 +472,15 @@ class Redistancer:
     ) -> None:
         shape = tuple(int(s) for s in shape)
         if len(shape) != 3 or min(shape) < 1:
-            raise ValueError(f"shape: must be 3 positive sizes, got {shape}")
+            raise SceneError(f"shape: must be 3 positive sizes, got {shape}")
         if not spacing > 0.0:
-            raise ValueError(f"spacing: must be positive, got {spacing}")
+            raise SceneError(f"spacing: must be positive, got {spacing}")
         if method not in METHODS:
-            raise ValueError(f"method: must be one of {METHODS}, got {method!r}")
+            raise SceneError(f"method: must be one of {METHODS}, got {method!r}")
         if band not in BAND_MODES:
-            raise ValueError(f"band: must be one of {tuple(BAND_MODES)}, got {band!r}")
+            raise SceneError(f"band: must be one of {tuple(BAND_MODES)}, got {band!r}")
         if int(passes) < 1:
-            raise ValueError(f"passes: must be at least 1, got {passes}")
+            raise SceneError(f"passes: must be at least 1, got {passes}")
         self.device = wp.get_device(device)
         self.shape = shape
         self.spacing = float(spacing)
@@ -501,12 +537,12 @@ class Redistancer:
 
     def _check(self, array: wp.array, name: str) -> None:
         if tuple(array.shape) != self.shape or array.device != self.device:
-            raise ValueError(
+            raise SceneError(
                 f"{name}: expected shape {self.shape} on {self.device}, "
                 f"got {tuple(array.shape)} on {array.device}"
             )
         if array.dtype != wp.float32:
-            raise ValueError(f"{name}: expected float32, got {array.dtype}")
+            raise SceneError(f"{name}: expected float32, got {array.dtype.__name__}")
 
     def _sweep(self, pts: PointSet) -> None:
         mode = 0 if pts is self._no_points else 1
@@ -543,6 +579,9 @@ class Redistancer:
         Returns:
             :attr:`band_count`, a device array of one int32: the number of band nodes, 0 when
             ``phi`` had no zero crossing. Reading it (``.numpy()``) synchronises.
+
+        Raises:
+            SceneError: If ``phi`` does not have this shape, device and dtype.
         """
         self._check(phi, "phi")
         self.band_count.zero_()
@@ -585,10 +624,13 @@ class Redistancer:
             origin: World position of node ``(0, 0, 0)``.
             out: Output of shape ``shape``, float32, on this device; world units.
             cap: If given, distances above it are clamped to it.
+
+        Raises:
+            SceneError: If ``out`` or ``points`` does not match this grid and device.
         """
         self._check(out, "out")
         if points.device != self.device or points.dtype != wp.vec3:
-            raise ValueError(
+            raise SceneError(
                 f"points: expected a wp.vec3 array on {self.device}, "
                 f"got {points.dtype.__name__} on {points.device}"
             )
