@@ -196,3 +196,18 @@ def test_a_non_finite_phi_stops_the_run_and_keeps_the_last_good_state(octant):
     np.testing.assert_array_equal(solver.phi.numpy(), good)
     assert solver.history[-1]["iteration"] == 10
     solver.run(2)  # and it can go on from there
+
+
+def test_returned_arrays_do_not_change_when_the_solver_goes_on(octant):
+    # On the CPU, wp.array.numpy() is a view of the device buffer: what the solver hands out
+    # must be a copy.
+    solver = ws.Reconstructor(octant, resolution=20, bulge=0.5, device="cpu")
+    bent, start = solver.bent_phi.copy(), solver.initial_phi.copy()
+    result = solver.result()
+    phi, snapshot = result.phi.copy(), solver.phi_numpy()
+    solver.run(15, measure_every=0)
+    np.testing.assert_array_equal(solver.bent_phi, bent)
+    np.testing.assert_array_equal(solver.initial_phi, start)
+    np.testing.assert_array_equal(result.phi, phi)
+    np.testing.assert_array_equal(snapshot, phi)
+    assert not np.array_equal(solver.bent_phi, solver.initial_phi)  # the fit changed the start

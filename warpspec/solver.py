@@ -383,10 +383,10 @@ class Reconstructor:
             launch_bend(self.phi, self._owner_dist, self._tmp, spacing=h, c=self.bulge)
             self.phi, self._tmp = self._tmp, self.phi
             self._redistancer.reinitialize(self.phi)
-        self.bent_phi = self.phi.numpy()
+        self.bent_phi = self.phi.numpy().copy()
         if self.fit_iterations and self.scene.num_specularities:
             self._fit_start(point, normal)
-        self.initial_phi = self.phi.numpy()
+        self.initial_phi = self.phi.numpy().copy()
 
     def _fit_start(self, point: np.ndarray, normal: np.ndarray) -> None:
         """Refine the start with a height field fitted to the points and the normals.
@@ -618,7 +618,7 @@ class Reconstructor:
 
     def phi_numpy(self) -> np.ndarray:
         """A host copy of the current level set."""
-        return self.phi.numpy()
+        return self.phi.numpy().copy()
 
     def result(self) -> Result:
         """The current surface as a :class:`Result` (mesh, level set, grid, history).
@@ -626,7 +626,7 @@ class Reconstructor:
         Raises:
             ReconstructionError: If the zero set has left the domain (no surface to mesh).
         """
-        phi = self.phi.numpy()
+        phi = self.phi.numpy().copy()
         self._intersect()
         hits = self._hits.numpy().astype(np.float64)
         hits[self._active.numpy() == 0] = np.nan
