@@ -15,6 +15,9 @@ from warpspec.evaluate import (
     crop_mesh,
     evaluate,
     hull_region,
+    mesh_normals_at,
+    ray_mesh_intersect,
+    truth_region,
 )
 from warpspec.synthetic import make_scene
 
@@ -166,3 +169,47 @@ def test_bad_input_raises():
         evaluate(empty, sphere)
     with pytest.raises(SceneError, match="region"):
         evaluate(sphere, sphere, region=[[5, 5, 5], [6, 5, 5], [5, 6, 5]])
+
+
+def test_rays_meet_a_sphere_mesh_where_they_meet_the_sphere():
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    rng = np.random.default_rng(4)
+    origins = rng.normal(size=(40, 3))
+    origins = 3.0 * origins / np.linalg.norm(origins, axis=1, keepdims=True)
+    targets = 0.5 * rng.uniform(-1, 1, size=(40, 3))
+    dirs = targets - origins
+    hits, faces = ray_mesh_intersect(mesh, origins, dirs)
+    assert np.all(faces >= 0)
+    # The hit lies on the face it names, on the near side of the sphere.
+    tri = mesh.triangles[faces]
+    off = np.einsum("ij,ij->i", hits - tri[:, 0], mesh.face_normals[faces])
+    assert np.abs(off).max() < 1e-12
+    r = np.linalg.norm(hits, axis=1)
+    assert np.all((r > 1 - 5e-4) & (r <= 1 + 1e-12))
+    assert np.all(np.einsum("ij,ij->i", hits - origins, dirs) > 0)
+    assert np.all(np.einsum("ij,ij->i", hits, origins) > 0)
+    # A ray that points away misses; one that starts inside meets the far side.
+    hits, faces = ray_mesh_intersect(mesh, [[3.0, 0, 0], [0, 0, 0]], [[1.0, 0, 0], [0, 0, 1.0]])
+    assert faces[0] == -1 and np.all(np.isnan(hits[0]))
+    assert hits[1] == pytest.approx([0, 0, 1], abs=1e-12)
+
+
+def test_vertex_normals_smooth_the_facets():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    rng = np.random.default_rng(1)
+    q = rng.normal(size=(200, 3))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    face = mesh_normals_at(sphere, q)
+    vertex = mesh_normals_at(sphere, q, mode="vertex")
+    np.testing.assert_allclose(np.linalg.norm(vertex, axis=1), 1.0, atol=1e-12)
+    err_face = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", face, q), -1, 1)))
+    err_vertex = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vertex, q), -1, 1)))
+    assert err_vertex.mean() < 0.5 * err_face.mean()
+    with pytest.raises(SceneError, match="mode"):
+        mesh_normals_at(sphere, q, mode="phong")
+
+
+def test_truth_region_ignores_missing_points():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [np.nan, np.nan, np.nan]])
+    region = truth_region(pts, [[0, 1, 0]])
+    assert region.contains(np.array([[0.2, 0.2, 0.0], [0.9, 0.9, 0.0]])).tolist() == [True, False]

@@ -346,3 +346,12 @@ def test_clip_mesh_cuts_along_the_plane():
     assert cut.area == pytest.approx((1.0 - 0.33) * 1.5, rel=1e-12)
     assert cut.vertices[:, 0].min() == pytest.approx(0.33, abs=1e-12)
     assert np.all(cut.face_normals[:, 2] > 0.999)
+
+
+def test_truth_dict_holds_what_an_evaluation_needs(scenes):
+    s = scenes["ellipsoid-cap"]
+    d = json.loads(json.dumps(s.truth_dict()))
+    np.testing.assert_allclose(d["truth_points"], s.truth_points)
+    np.testing.assert_allclose(d["truth_normals"], s.truth_normals)
+    np.testing.assert_allclose(d["points"], s.points)
+    assert d["outliers"] == [] and d["name"] == "ellipsoid-cap"

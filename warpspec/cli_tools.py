@@ -1,11 +1,379 @@
-"""Subcommands for synthetic scenes and evaluation (``warpspec synth``, ``warpspec evaluate``)."""
+"""Subcommands for synthetic scenes and evaluation (``warpspec synth``, ``warpspec evaluate``).
+
+Both report bad input as :class:`warpspec.errors.SceneError` with a one-line message that names
+the flag; ``warpspec.cli.main`` turns it into exit status 2. Files are written through a
+temporary file in the same folder and ``os.replace``, so an interrupted run leaves no partial
+file behind.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
 
-__all__ = ["add_parsers"]
+import numpy as np
+
+from .errors import SceneError
+
+__all__ = ["EVALUATE_DEFINITIONS", "add_parsers"]
+
+MESH_FORMATS = (".ply", ".obj", ".stl", ".off", ".glb")
+
+EVALUATE_DEFINITIONS = """\
+How each figure is defined:
+  Both meshes are sampled uniformly by area (--samples points each, seeded, plus their
+  vertices); each sample's distance to the other mesh is exact (closest point on its
+  triangles, no sampling of the other side).
+  completeness  distances from the samples of the TRUTH to the reconstructed MESH
+                (is every part of the truth reconstructed?)
+  accuracy      distances from the samples of the reconstructed MESH to the TRUTH
+                (is every part of the reconstruction on the truth?)
+  Each is summarised by its mean, RMS (root of the mean square), 95th percentile and max,
+  in world units and in voxel widths h.
+  Chamfer       the symmetric mean: (accuracy mean + completeness mean) / 2
+                (not the sum, and not of squared distances)
+  Hausdorff     max(accuracy max, completeness max)
+  h             the voxel width of the reconstruction grid: the longest side of the scene's
+                domain divided by --resolution (the solver's grid), or --spacing
+  region        with --scene (or --truth-json), only samples inside the region the
+                constraints cover count: the true specular points and the point constraints
+                are projected onto their best-fit plane, and a sample counts when its
+                projection falls inside their 2D convex hull (the paper's crop); --no-crop
+                keeps every sample
+  normal angle  at each true specular point x: the angle in degrees between the true
+                surface normal at x and the normal of the face of MESH closest to x.
+                The true specular points come from --truth-json when given (the generator's
+                exact points and normals); otherwise they are where the scene's rays first
+                meet the TRUTH mesh, with the normal of the TRUTH face hit (so TRUTH against
+                itself gives 0; a faceted TRUTH adds its facet error).
+"""
+
+
+# --------------------------------------------------------------------------------------------
+# Small helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _output_path(text: str, flag: str, suffixes: tuple[str, ...]) -> Path:
+    path = Path(text)
+    if path.suffix.lower() not in suffixes:
+        raise SceneError(f"{flag}: {text!r} has an unsupported extension; use one of "
+                         f"{', '.join(suffixes)}")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise SceneError(f"{flag}: the folder {str(parent)!r} does not exist")
+    return path
+
+
+def _input_path(text: str, flag: str) -> Path:
+    path = Path(text)
+    if not path.is_file():
+        raise SceneError(f"{flag}: no such file {text!r}")
+    return path
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def _load_mesh(text: str, flag: str):
+    import trimesh
+
+    path = _input_path(text, flag)
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise SceneError(f"{flag}: cannot read {text!r} as a mesh ({exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise SceneError(f"{flag}: {text!r} holds no triangles")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise SceneError(f"{flag}: {text!r} has non-finite vertices")
+    return mesh
+
+
+def _load_truth_json(text: str, flag: str) -> dict:
+    path = _input_path(text, flag)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SceneError(f"{flag}: {text!r} is not readable JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise SceneError(f"{flag}: {text!r} must hold a JSON object")
+    out = {}
+    for key, required in (("truth_points", True), ("truth_normals", True), ("points", False),
+                          ("outliers", False)):
+        if key not in data:
+            if required:
+                raise SceneError(f"{flag}: {text!r} has no field {key!r} (write it with "
+                                 "'warpspec synth --truth-json')")
+            continue
+        try:
+            arr = np.asarray(data[key], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SceneError(f"{flag}: field {key!r} of {text!r} is not numeric") from None
+        if key == "outliers":
+            out[key] = arr.astype(np.int64).reshape(-1)
+            continue
+        if arr.size and (arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr))):
+            raise SceneError(f"{flag}: field {key!r} of {text!r} must be finite (N, 3) rows")
+        out[key] = arr.reshape(-1, 3)
+    if out["truth_points"].shape != out["truth_normals"].shape:
+        raise SceneError(f"{flag}: 'truth_points' and 'truth_normals' of {text!r} differ in "
+                         "length")
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# warpspec synth
+# --------------------------------------------------------------------------------------------
+
+
+def _cmd_synth(args: argparse.Namespace) -> int:
+    from .synthetic import make_scene, scene_names
+
+    if args.name not in scene_names():
+        raise SceneError(f"NAME: unknown scene {args.name!r}; expected one of "
+                         f"{', '.join(scene_names())}")
+    out = _output_path(args.output, "--output", (".json",))
+    truth = _output_path(args.truth, "--truth", MESH_FORMATS) if args.truth else None
+    truth_json = (_output_path(args.truth_json, "--truth-json", (".json",))
+                  if args.truth_json else None)
+    if args.noise < 0:
+        raise SceneError(f"--noise: must be a non-negative number of pixels, got {args.noise:g}")
+    if not 0 <= args.outliers <= 1:
+        raise SceneError(f"--outliers: must be a fraction in [0, 1], got {args.outliers:g}")
+    if args.seed < 0:
+        raise SceneError(f"--seed: must be a non-negative integer, got {args.seed}")
+    paths = [p for p in (out, truth, truth_json) if p is not None]
+    if len({p.resolve() for p in paths}) < len(paths):
+        raise SceneError("--output, --truth and --truth-json must name different files")
+
+    synthetic = make_scene(args.name, noise=args.noise, outliers=args.outliers, seed=args.seed)
+    _atomic_write(out, lambda tmp: synthetic.to_json(tmp))
+    written = [str(out)]
+    if truth is not None:
+        mesh = synthetic.truth_mesh()
+        _atomic_write(truth, lambda tmp: mesh.export(tmp, file_type=truth.suffix.lower()[1:]))
+        written.append(f"{truth} ({len(mesh.faces)} faces)")
+    if truth_json is not None:
+        text = json.dumps(synthetic.truth_dict(), indent=1) + "\n"
+        _atomic_write(truth_json, lambda tmp: tmp.write_text(text))
+        written.append(str(truth_json))
+    if not args.quiet:
+        print(f"{args.name}: {len(synthetic.truth_points)} specularities "
+              f"({int(synthetic.outlier_mask.sum())} outliers, noise {args.noise:g} px), "
+              f"{len(synthetic.cameras)} cameras, {len(synthetic.points)} points, "
+              f"{synthetic.scene_dict['light']['type']} light -> {', '.join(written)}",
+              file=sys.stderr)
+    return 0
+
+
+def _scene_list() -> str:
+    from .synthetic import SCENES
+
+    lines = []
+    for name, make in SCENES.items():
+        doc = (make.__doc__ or "").strip().splitlines()
+        lines.append(f"  {name:<14} {doc[0] if doc else ''}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------
+# warpspec evaluate
+# --------------------------------------------------------------------------------------------
+
+
+def _true_specular_points(scene, truth) -> tuple[np.ndarray, np.ndarray]:
+    """Where the scene's rays first meet the truth mesh, and the normals of the faces hit.
+
+    Face normals keep the evaluation exact for the truth against itself; the exact normals of
+    a smooth truth come with ``--truth-json``.
+    """
+    from .evaluate import ray_mesh_intersect
+
+    origins, dirs = scene.rays()
+    hits, faces = ray_mesh_intersect(truth, origins, dirs)
+    ok = faces >= 0
+    return hits[ok], np.asarray(truth.face_normals, dtype=np.float64)[faces[ok]]
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluate import evaluate, truth_region
+    from .grid import Grid
+
+    json_out = _output_path(args.json, "--json", (".json",)) if args.json else None
+    if args.samples < 100:
+        raise SceneError(f"--samples: must be at least 100, got {args.samples}")
+    if args.spacing is not None and args.spacing <= 0:
+        raise SceneError(f"--spacing: must be a positive length, got {args.spacing:g}")
+    if args.resolution is not None and args.resolution < 2:
+        raise SceneError(f"--resolution: must be at least 2 cells, got {args.resolution}")
+    if args.resolution is not None and args.spacing is not None:
+        raise SceneError("--resolution: give either --resolution (with --scene) or --spacing")
+    if args.resolution is not None and args.scene is None:
+        raise SceneError("--resolution: needs --scene (h is the longest side of the scene's "
+                         "domain divided by N); without a scene give --spacing")
+
+    mesh = _load_mesh(args.mesh, "MESH")
+    truth = _load_mesh(args.truth, "--truth")
+    scene = None
+    if args.scene is not None:
+        from .scene import Scene
+
+        scene = Scene.load(_input_path(args.scene, "--scene"))
+    known = _load_truth_json(args.truth_json, "--truth-json") if args.truth_json else None
+
+    spacing = args.spacing
+    if spacing is None and scene is not None:
+        lo, hi = scene.bounds()
+        spacing = Grid.from_bounds(lo, hi, resolution=args.resolution or 64).spacing
+
+    specular = normals = None
+    constraint_points = np.zeros((0, 3))
+    if known is not None:
+        keep = np.ones(len(known["truth_points"]), dtype=bool)
+        keep[known.get("outliers", np.zeros(0, dtype=np.int64))] = False
+        specular, normals = known["truth_points"][keep], known["truth_normals"][keep]
+        constraint_points = known.get("points", constraint_points)
+    elif scene is not None:
+        specular, normals = _true_specular_points(scene, truth)
+    if scene is not None:
+        constraint_points = scene.points
+    region = None
+    if not args.no_crop and specular is not None:
+        try:
+            region = truth_region(specular, constraint_points)
+        except SceneError as exc:
+            raise SceneError(f"--scene: cannot crop to the constraints ({exc}); use --no-crop"
+                             ) from None
+    try:
+        result = evaluate(mesh, truth, spacing=spacing, region=region,
+                          specular_points=specular, true_normals=normals,
+                          samples=args.samples, seed=args.seed)
+    except SceneError as exc:
+        raise SceneError(f"MESH: {exc}") from None
+
+    print(f"# {args.mesh} against {args.truth}")
+    if spacing:
+        how = (f"--spacing {spacing:g}" if args.spacing is not None else
+               f"scene domain / {args.resolution or 64}")
+        print(f"voxel width h = {spacing:.6g} ({how})")
+    print(result.table())
+    if json_out is not None:
+        data = result.to_dict()
+        data.update(mesh=str(args.mesh), truth=str(args.truth), scene=args.scene,
+                    resolution=(args.resolution or 64) if scene is not None and
+                    args.spacing is None else None)
+        if result.normal_angles is not None:
+            data["normal_angle_deg"]["values"] = [float(a) for a in result.normal_angles]
+        text = json.dumps(_clean(data), indent=1) + "\n"
+        _atomic_write(json_out, lambda tmp: tmp.write_text(text))
+    return 0
+
+
+def _clean(value):
+    """Replace non-finite floats by ``None`` so that the JSON is standard."""
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+# --------------------------------------------------------------------------------------------
+# Parsers
+# --------------------------------------------------------------------------------------------
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    """Register this module's subcommands on the ``warpspec`` parser."""
+    """Register ``synth`` and ``evaluate`` on the ``warpspec`` parser."""
+    synth = sub.add_parser(
+        "synth",
+        help="write a built-in synthetic scene with its ground truth",
+        description="Write a built-in synthetic scene (scene format version 1) and, optionally, "
+                    "its ground truth. The geometry of each scene is fixed; --seed drives only "
+                    "the pixel noise and the outliers.",
+        epilog="scenes:\n" + _scene_list(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    synth.add_argument("name", metavar="NAME", help="built-in scene (listed below)")
+    synth.add_argument("-o", "--output", required=True, metavar="SCENE",
+                       help="scene file to write (.json)")
+    synth.add_argument("--truth", metavar="MESH", default=None,
+                       help="also write the truth mesh: the surface cut to the patch the "
+                            f"highlights lie on ({', '.join(MESH_FORMATS)})")
+    synth.add_argument("--truth-json", metavar="FILE", default=None,
+                       help="also write the true specular points and normals, the point "
+                            "constraints, the clean pixels and the outliers' indices (.json)")
+    synth.add_argument("--noise", type=_finite, default=0.0, metavar="PX",
+                       help="standard deviation of Gaussian noise added to each highlight's "
+                            "pixel, in pixels (default 0)")
+    synth.add_argument("--outliers", type=_finite, default=0.0, metavar="F",
+                       help="fraction of highlights replaced by a pixel drawn uniformly over "
+                            "the image (default 0)")
+    synth.add_argument("--seed", type=_integer, default=0, metavar="S",
+                       help="seed of the noise and the outliers (default 0)")
+    synth.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    synth.set_defaults(func=_cmd_synth)
+
+    ev = sub.add_parser(
+        "evaluate",
+        help="score a reconstructed mesh against the truth (completeness, accuracy, normals)",
+        description="Score a reconstructed mesh against the ground truth and print the figures "
+                    "as a markdown table.",
+        epilog=EVALUATE_DEFINITIONS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ev.add_argument("mesh", metavar="MESH", help="the reconstructed mesh (.ply, .obj, .stl, ...)")
+    ev.add_argument("--truth", required=True, metavar="TRUTH", help="the truth mesh")
+    ev.add_argument("--scene", default=None, metavar="SCENE",
+                    help="the scene file: gives the voxel width h, the crop to the constraints "
+                         "and the specular rays (whose first hits on TRUTH are taken as the "
+                         "true specular points)")
+    ev.add_argument("--truth-json", default=None, metavar="FILE",
+                    help="exact true specular points and normals (and point constraints), as "
+                         "written by 'warpspec synth --truth-json'; outliers are left out")
+    ev.add_argument("--resolution", type=_integer, default=None, metavar="N",
+                    help="with --scene: h = longest side of the scene's domain / N, the grid "
+                         "of 'warpspec reconstruct --resolution N' (default 64)")
+    ev.add_argument("--spacing", type=_finite, default=None, metavar="H",
+                    help="give the voxel width h directly, in world units")
+    ev.add_argument("--no-crop", action="store_true",
+                    help="measure the whole meshes, not only the region the constraints cover")
+    ev.add_argument("--samples", type=_integer, default=20_000,
+                    help="area-uniform samples per mesh, on top of its vertices (default 20000)")
+    ev.add_argument("--seed", type=_integer, default=0, help="seed of the sampling (default 0)")
+    ev.add_argument("--json", default=None, metavar="FILE",
+                    help="also write every figure to this file (.json)")
+    ev.set_defaults(func=_cmd_evaluate)

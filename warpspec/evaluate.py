@@ -15,6 +15,10 @@ As in the paper, the comparison can be restricted to the region the constraints 
 component analysis) and keeps those that fall inside the 2D convex hull of the projected
 constraints.
 
+The normal angle at a specular point ``x`` is the angle between the true unit normal there and
+the normal of the face of the reconstructed mesh closest to ``x`` (no smoothing: a kink or a
+dimple under the highlight counts in full).
+
 No spatial index beyond :class:`scipy.spatial.cKDTree` is needed: trimesh's proximity and ray
 queries require ``rtree``, which warpspec does not depend on.
 """
@@ -38,6 +42,9 @@ __all__ = [
     "crop_mesh",
     "evaluate",
     "hull_region",
+    "mesh_normals_at",
+    "ray_mesh_intersect",
+    "truth_region",
 ]
 
 CHAMFER_CONVENTION = "symmetric mean: (accuracy_mean + completeness_mean) / 2"
@@ -551,3 +558,113 @@ def evaluate(
         normal_angle_max=float(angles.max()) if angles is not None and len(angles) else None,
         normal_angles=angles,
     )
+
+
+def mesh_normals_at(
+    mesh: trimesh.Trimesh, points: np.ndarray, *, mode: str = "face"
+) -> np.ndarray:
+    """Unit normals of ``mesh`` at the points of it closest to ``points``.
+
+    Args:
+        mesh: The mesh.
+        points: Query points ``(N, 3)``.
+        mode: ``"face"``: the normal of the closest face (what :func:`evaluate` reports);
+            ``"vertex"``: the vertex normals (trimesh's, averaged over the faces around each
+            vertex) interpolated barycentrically at the closest point, as a shaded render shows
+            the surface.
+
+    Returns:
+        Unit normals ``(N, 3)``.
+
+    Raises:
+        SceneError: If ``mode`` is unknown or the mesh has no faces.
+    """
+    if mode not in ("face", "vertex"):
+        raise SceneError(f"mode: expected 'face' or 'vertex', got {mode!r}")
+    cp, _, face, _ = closest_point(mesh, points)
+    if mode == "face":
+        return np.asarray(mesh.face_normals, dtype=np.float64)[face]
+    tri = np.asarray(mesh.triangles, dtype=np.float64)[face]
+    bary = trimesh.triangles.points_to_barycentric(tri, cp)
+    vn = np.asarray(mesh.vertex_normals, dtype=np.float64)[np.asarray(mesh.faces)[face]]
+    n = np.einsum("ij,ijk->ik", bary, vn)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def ray_mesh_intersect(
+    mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray, *, chunk: int = 4_000_000
+) -> tuple[np.ndarray, np.ndarray]:
+    """First intersection of each ray with a triangle mesh (Moller-Trumbore, every triangle).
+
+    Brute force over the triangles, in chunks of ``chunk`` ray-triangle pairs: exact, needs no
+    spatial index, and fast enough for the few dozen rays of a scene.
+
+    Args:
+        mesh: The mesh (either side of a triangle counts).
+        origins: Ray origins ``(M, 3)``.
+        directions: Ray directions ``(M, 3)`` (need not be unit).
+        chunk: Ray-triangle pairs tested at once (bounds the memory use).
+
+    Returns:
+        ``(points, faces)``: the first hit of each ray in front of its origin ``(M, 3)`` (NaN
+        when the ray misses) and the index of the face it hits ``(M,)`` (-1 on a miss).
+    """
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
+    m, f = len(o), len(tri)
+    points = np.full((m, 3), np.nan)
+    faces = np.full(m, -1, dtype=np.int64)
+    if f == 0 or m == 0:
+        return points, faces
+    a = tri[:, 0]
+    e1 = tri[:, 1] - a
+    e2 = tri[:, 2] - a
+    scale = float(np.abs(tri).max()) or 1.0
+    per = max(1, chunk // f)
+    for start in range(0, m, per):
+        oo = o[start:start + per, None, :]
+        dd = d[start:start + per, None, :]
+        p = np.cross(dd, e2[None])
+        det = np.einsum("rfk,fk->rf", p, e1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            s = oo - a[None]
+            u = np.einsum("rfk,rfk->rf", s, p) * inv
+            q = np.cross(s, e1[None])
+            v = np.einsum("rfk,rfk->rf", np.broadcast_to(dd, q.shape), q) * inv
+            t = np.einsum("rfk,fk->rf", q, e2) * inv
+            tol = 1e-12
+            ok = ((np.abs(det) > 1e-300) & (u >= -tol) & (v >= -tol) & (u + v <= 1 + tol)
+                  & (t > 1e-12 * scale))
+        t = np.where(ok, t, np.inf)
+        best = np.argmin(t, axis=1)
+        tb = t[np.arange(len(t)), best]
+        hit = np.isfinite(tb)
+        rows = np.arange(start, start + len(t))[hit]
+        points[rows] = o[rows] + tb[hit, None] * d[rows]
+        faces[rows] = best[hit]
+    return points, faces
+
+
+def truth_region(
+    specular_points: np.ndarray, points: np.ndarray, *, margin: float = 0.0
+) -> HullRegion:
+    """The region the constraints cover, from the true geometry.
+
+    The hull (see :func:`hull_region`) of the true specular points and the point constraints:
+    the crop the paper shows, taken from the truth rather than from the reconstruction, so that
+    every reconstruction of a scene is scored over the same region.
+
+    Args:
+        specular_points: True specular points ``(M, 3)`` (NaN rows are ignored).
+        points: Point constraints ``(S, 3)``.
+        margin: Grow the hull by this distance in world units.
+
+    Raises:
+        SceneError: If the points span no 2D hull.
+    """
+    sp = np.asarray(specular_points, dtype=np.float64).reshape(-1, 3)
+    sp = sp[np.all(np.isfinite(sp), axis=1)]
+    return hull_region(np.vstack([sp, np.asarray(points, dtype=np.float64).reshape(-1, 3)]),
+                       margin=margin)

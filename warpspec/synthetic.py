@@ -1467,6 +1467,7 @@ class SyntheticScene:
             "truth_points": self.truth_points.tolist(),
             "truth_normals": self.truth_normals.tolist(),
             "light_directions": self.light_directions.tolist(),
+            "points": self.points.tolist(),
             "clean_pixels": self.clean_pixels.tolist(),
             "outliers": np.flatnonzero(self.outlier_mask).tolist(),
             "camera_centres": self.camera_centres.tolist(),
