@@ -1,0 +1,335 @@
+"""Run every benchmark and write BENCHMARKS.md: the tables, the machine, the command.
+
+Each script runs in its own process (``sys.executable``), one after the other, so that their
+timings do not overlap. ``bench_redistance.py`` (owned apart) runs too when it is present; its
+table is parsed for the issue-4 targets.
+
+    python benchmarks/run_all.py [--device cpu] [--repeats N] [--sizes 64 128 256]
+    python benchmarks/run_all.py --smoke          # tiny sizes, seconds; for CI
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+
+BENCHES = ("numpy_step", "iteration", "redistance", "octant", "memory")
+TITLES = {
+    "numpy_step": "NumPy peer against warpspec's dense step kernel (agreement)",
+    "iteration": "One iteration: warpspec against the NumPy step",
+    "redistance": "Reinitialisation: warpspec.redistance against scikit-fmm",
+    "octant": "The octant end to end (cold and warm kernel cache)",
+    "memory": "Device memory per voxel",
+}
+SCRIPTS = {
+    "numpy_step": "numpy_step.py",
+    "iteration": "bench_iteration.py",
+    "redistance": "bench_redistance.py",
+    "octant": "bench_octant.py",
+    "memory": "bench_memory.py",
+}
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (or what ``platform`` knows)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def _mem_total() -> str:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal:"):
+                return f"{int(line.split()[1]) / 2**20:.1f} GiB"
+    except (OSError, ValueError, IndexError):
+        pass
+    return "unknown"
+
+
+def _version(module: str) -> str:
+    try:
+        from importlib.metadata import version
+
+        return version(module)
+    except Exception:
+        return "not installed"
+
+
+def _commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=10)
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def machine_info(device: str) -> dict:
+    """Platform, CPU, cores, memory, versions and the Warp device's name."""
+    import numpy as np
+    import warp as wp
+
+    from warpspec._runtime import resolve_device
+
+    dev = resolve_device(device)
+    info = {
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu": cpu_model(),
+        "cores": f"{os.cpu_count()} ({len(os.sched_getaffinity(0))} usable by this process)"
+        if hasattr(os, "sched_getaffinity") else str(os.cpu_count()),
+        "memory": _mem_total(),
+        "warp": wp.__version__,
+        "numpy": np.__version__,
+        "scikit-fmm": _version("scikit-fmm"),
+        "device": f"{dev.alias}: {dev.name}",
+        "commit": f"{_commit()} (the working tree may hold uncommitted changes)",
+    }
+    if dev.is_cuda:
+        info["device"] += (f", sm_{dev.arch}, {dev.total_memory / 2**30:.1f} GiB, "
+                           f"driver {wp.get_cuda_driver_version()}")
+    return info
+
+
+def _supports(script: Path, flag: str) -> bool:
+    """Whether a script's ``--help`` lists ``flag``."""
+    out = subprocess.run([sys.executable, str(script), "--help"], cwd=ROOT, capture_output=True,
+                         text=True)
+    return flag in out.stdout
+
+
+def bench_args(name: str, args: argparse.Namespace, cuda: bool) -> list[str] | None:
+    """Command-line arguments for one benchmark script, or None to skip it."""
+    dev = ["--device", args.device]
+    rep = ["--repeats", str(args.repeats)] if args.repeats else []
+    if name == "numpy_step":
+        return ["--resolution", "12" if args.smoke else "24"] + dev
+    if name == "iteration":
+        if args.smoke:
+            return ["--sizes", "16", "--repeats", "1", "--iterations", "10"] + dev
+        return (["--sizes", *args.sizes] if args.sizes else []) + rep + dev
+    if name == "octant":
+        if args.smoke:
+            return ["--resolution", "16", "--iterations", "2", "--repeats", "1",
+                    "--modes", "warm"] + dev
+        return rep + dev
+    if name == "memory":
+        if args.smoke:
+            return ["--sizes", "16", "--iterations", "2"] + dev
+        return (["--sizes", "64", "128", "256", "512"] if cuda else []) + dev
+    if name == "redistance":
+        script = HERE / SCRIPTS[name]
+        if args.smoke:
+            return ["--smoke"] + dev if _supports(script, "--smoke") else None
+        sizes = [int(v) for item in (args.sizes or ["256"]) for v in str(item).split(",") if v]
+        large = ["--large"] if max(sizes) >= 256 else []
+        return large + rep + dev
+    raise ValueError(name)
+
+
+def run_bench(name: str, extra: list[str], json_path: Path | None) -> dict:
+    """Run one script; return its command, output, seconds and parsed JSON results."""
+    cmd = [sys.executable, str(HERE / SCRIPTS[name]), *extra]
+    if json_path is not None:
+        cmd += ["--json", str(json_path)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    results = None
+    if json_path is not None and json_path.exists():
+        results = json.loads(json_path.read_text())
+    shown = [Path(sys.executable).name if c == sys.executable else c for c in cmd
+             if not (json_path is not None and c in ("--json", str(json_path)))]
+    shown[1] = str(Path(shown[1]).relative_to(ROOT))
+    return {"name": name, "command": shlex.join(shown), "stdout": proc.stdout.strip(),
+            "stderr": proc.stderr.strip(), "returncode": proc.returncode, "seconds": seconds,
+            "results": results}
+
+
+def _redistance_row(stdout: str, size: int = 128) -> dict | None:
+    """The default-band warpspec row of bench_redistance's table at ``size``^3."""
+    for line in stdout.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) >= 5 and cells[0] == f"{size}^3" and cells[1].startswith("warpspec") \
+                and "band=gradient" in cells[1]:
+            try:
+                return {"method": cells[1], "seconds": float(cells[2]),
+                        "speedup": float(cells[3].rstrip("x")), "band_error": float(cells[4])}
+            except ValueError:
+                return None
+    return None
+
+
+def targets(runs: dict[str, dict], cuda: bool) -> list[tuple[str, str, str]]:
+    """Issue 4's targets against what was measured: (target, measured, verdict)."""
+    rows = []
+
+    def verdict(ok: bool | None) -> str:
+        return "n/a" if ok is None else ("met" if ok else "**not met**")
+
+    it = (runs.get("iteration") or {}).get("results")
+    if it:
+        by = {r["size"]: r for r in it["rows"]}
+        if 128 in by:
+            r = by[128]
+            ratio = r["numpy_s"] / r["iteration_s"]
+            rows.append(("iteration at 128^3 >= 5x faster than the NumPy step",
+                         f"{ratio:.2f}x ({1e3 * r['iteration_s']:.1f} ms vs "
+                         f"{1e3 * r['numpy_s']:.0f} ms)", verdict(ratio >= 5)))
+        if cuda and 256 in by:
+            ms = 1e3 * by[256]["iteration_s"]
+            rows.append(("GPU: iteration at 256^3 <= 2 ms", f"{ms:.2f} ms", verdict(ms <= 2)))
+        if cuda:
+            rows.append(("GPU: 512^3 runs", "ran" if 512 in by else "not run",
+                         verdict(512 in by)))
+    red = runs.get("redistance")
+    if red and red.get("returncode") == 0:
+        row = _redistance_row(red["stdout"])
+        if row:
+            rows.append(("redistance at 128^3 >= 10x faster than scikit-fmm order 1",
+                         f"{row['speedup']:.1f}x ({row['method']}, {row['seconds']:.3f} s)",
+                         verdict(row["speedup"] >= 10)))
+            rows.append(("redistance band max error <= 0.1 h (abs(d) < 3h)",
+                         f"{row['band_error']:.3f} h", verdict(row["band_error"] <= 0.1)))
+    octant = (runs.get("octant") or {}).get("results")
+    if octant:
+        for r in octant["rows"]:
+            limit = 20.0 if r["cache"].startswith("cold") else 5.0
+            rows.append((f"octant {r['runner']}, {r['cache']}: <= {limit:.0f} s",
+                         f"{r['wall_s']:.2f} s wall, {r['cpu_s']:.2f} s CPU",
+                         verdict(r["wall_s"] <= limit)))
+    mem = (runs.get("memory") or {}).get("results")
+    if mem:
+        for r in mem["rows"]:
+            peak = r["tracker_peak_bytes"] or r["held_bytes"]
+            per = peak / r["voxels"]
+            if "pool_high_bytes" in r:
+                per = max(per, r["pool_high_bytes"] / r["voxels"])
+            rows.append((f"peak device memory at {r['size']}^3 <= 40 B/voxel",
+                         f"{per:.1f} B/voxel", verdict(per <= 40)))
+    return rows
+
+
+def render(runs: dict[str, dict], info: dict, command: str, args: argparse.Namespace,
+           cuda: bool, started: str, load: tuple[tuple, tuple]) -> str:
+    """The text of BENCHMARKS.md."""
+    out = ["# warpspec benchmarks", ""]
+    if args.smoke:
+        out += ["**Smoke run** (tiny sizes, for CI): the numbers below mean nothing.", ""]
+    out += [
+        f"Made by `{command}` on {started} (run from the repository root). Each script ran "
+        "in its own process; its own command is given with its table. The machine is "
+        "shared and timings are noisy: compare the ratios measured side by side in one "
+        "process, not absolute times across runs.",
+        "",
+        "## Machine",
+        "",
+        "| | |",
+        "|---|---|",
+    ]
+    out += [f"| {k} | {v} |" for k, v in info.items()]
+    out += [f"| load average (1, 5, 15 min) | {_load(load[0])} at the start, {_load(load[1])} "
+            "at the end |", ""]
+    rows = targets(runs, cuda)
+    if rows:
+        out += ["## Issue 4 targets", "", "| target | measured | |", "|---|---|---|"]
+        out += [f"| {t} | {m} | {v} |" for t, m, v in rows]
+        out.append("")
+    for name in BENCHES:
+        if name not in runs:
+            continue
+        run = runs[name]
+        out += [f"## {TITLES[name]}", ""]
+        if run.get("skipped"):
+            out += [f"Skipped: {run['skipped']}.", ""]
+            continue
+        out += [f"`{run['command']}` ({run['seconds']:.0f} s)", ""]
+        if run["returncode"] != 0:
+            tail = "\n".join(run["stderr"].splitlines()[-15:])
+            out += [f"**Failed** with exit status {run['returncode']}:", "", "```", tail, "```",
+                    ""]
+        if run["stdout"]:
+            out += [run["stdout"], ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def _load(values: tuple) -> str:
+    return ", ".join(f"{v:.2f}" for v in values)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cpu", help="Warp device (cpu, cuda, cuda:0)")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="timed runs per row, passed to each script (default: theirs)")
+    parser.add_argument("--sizes", nargs="+", default=None,
+                        help="grids of the iteration benchmark (default 64 128 256, and 512 "
+                             "on CUDA); redistance gets --large when 256 is among them")
+    parser.add_argument("--only", nargs="+", choices=BENCHES, default=None,
+                        help="run only these benchmarks")
+    parser.add_argument("--skip", nargs="+", choices=BENCHES, default=[],
+                        help="leave these benchmarks out")
+    parser.add_argument("--smoke", action="store_true",
+                        help="everything at a tiny size, in seconds (CI); writes "
+                             "build/BENCHMARKS.smoke.md unless --output is given")
+    parser.add_argument("--output", default=None,
+                        help="markdown file to write (default BENCHMARKS.md at the root)")
+    args = parser.parse_args(argv)
+
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    load_start = os.getloadavg()
+    command = shlex.join(["python", "benchmarks/run_all.py", *(argv if argv is not None
+                                                                else sys.argv[1:])])
+    info = machine_info(args.device)
+    cuda = info["device"].startswith("cuda")
+    if args.output is None:
+        args.output = str(ROOT / ("build/BENCHMARKS.smoke.md" if args.smoke else "BENCHMARKS.md"))
+    names = [n for n in (args.only or BENCHES) if n not in args.skip]
+    runs: dict[str, dict] = {}
+    failed = []
+    with tempfile.TemporaryDirectory(prefix="warpspec-bench-") as tmp:
+        for name in names:
+            if not (HERE / SCRIPTS[name]).exists():
+                runs[name] = {"skipped": f"benchmarks/{SCRIPTS[name]} is not there"}
+                continue
+            extra = bench_args(name, args, cuda)
+            if extra is None:
+                runs[name] = {"skipped": f"benchmarks/{SCRIPTS[name]} has no --smoke mode"}
+                print(f"[run_all] {name}: skipped ({runs[name]['skipped']})", flush=True)
+                continue
+            print(f"[run_all] {name}: {SCRIPTS[name]} {shlex.join(extra)}", flush=True)
+            wants_json = name in ("iteration", "octant", "memory")
+            run = run_bench(name, extra, Path(tmp) / f"{name}.json" if wants_json else None)
+            runs[name] = run
+            print(run["stdout"], flush=True)
+            if run["returncode"] != 0:
+                failed.append(name)
+                print(run["stderr"], file=sys.stderr, flush=True)
+            print(f"[run_all] {name}: {run['seconds']:.0f} s", flush=True)
+    text = render(runs, info, command, args, cuda, started, (load_start, os.getloadavg()))
+    output = Path(args.output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(text)
+    print(f"[run_all] wrote {output}" + (f"; failed: {', '.join(failed)}" if failed else ""))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
