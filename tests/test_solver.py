@@ -161,7 +161,7 @@ def test_a_run_that_loses_its_surface_says_so(octant):
 
 def test_narrow_band_gives_the_dense_result(octant, device):
     phis = []
-    for band in (None, 6.0):
+    for band in (None, 4.0):
         solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, narrow_band=band,
                                   device=device)
         solver.run(40, measure_every=0)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
-from skimage import measure
 
 from .errors import ReconstructionError
 from .grid import Grid
+
+if TYPE_CHECKING:  # trimesh and scikit-image load in ~1 s: only when a mesh is made
+    import trimesh
 
 __all__ = ["crop_to_hull", "extract_mesh", "sample_trilinear"]
 
@@ -38,6 +41,9 @@ def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:
     Raises:
         ReconstructionError: If ``phi`` has no zero crossing inside the grid.
     """
+    import trimesh
+    from skimage import measure
+
     phi = np.asarray(phi, dtype=np.float32)
     if not (phi.min() < 0.0 < phi.max()):
         raise ReconstructionError(

@@ -43,6 +43,7 @@ from .scene import Scene
 __all__ = ["Reconstructor", "Result", "reconstruct"]
 
 REINIT_BAND = "gradient"
+FULL_REINIT_EVERY = 5
 
 MEASURE_KEYS = (
     "iteration",
@@ -254,7 +255,7 @@ class Reconstructor:
         fit_iterations: int = 5,
         fit_degree: int = 4,
         margin: float = 0.2,
-        narrow_band: float | None = 6.0,
+        narrow_band: float | None = 4.0,
         graph: bool | None = None,
         grid: Grid | None = None,
         resume: str | os.PathLike | None = None,
@@ -322,6 +323,7 @@ class Reconstructor:
         self._redistancer = Redistancer(shape, h, d, band=REINIT_BAND)
         self._good = wp.zeros(shape, dtype=float, device=d)  # last good phi; scratch at start
         self._good_iteration = 0
+        self._reinit_count = 0
         # The ownership pass and the redistancer never run at once: they share a scratch field.
         self._owner_dist = self._redistancer.distance
         self._band = None
@@ -465,7 +467,16 @@ class Reconstructor:
                 restored first.
         """
         self._check_finite()
-        self._redistancer.reinitialize(self.phi)
+        self._reinit_count += 1
+        if self._band is None or self._reinit_count % FULL_REINIT_EVERY == 0:
+            self._redistancer.reinitialize(self.phi)
+        else:
+            # Only the band changes between reinitialisations: redistance it alone. Far nodes
+            # keep old distances, whose error grows as the surface moves; every
+            # FULL_REINIT_EVERY-th time the whole grid is redone.
+            self._redistancer.reinitialize_band(self.phi, self._band, self._band_count,
+                                                size=self._band_size,
+                                                width=self.narrow_band + 2.0)
         self._rebuild_band()
         wp.copy(self._good, self.phi)
         self._good_iteration = self.iteration

@@ -202,12 +202,20 @@ def height_field(
     for m in range(coeffs.shape[0]):
         a = powers[m][0]
         b = powers[m][1]
+        ua = float(1.0)  # u^(a-1) and v^(b-1) by multiplication: pow is slow on the CPU
+        for _ in range(a - 1):
+            ua *= u
+        vb = float(1.0)
+        for _ in range(b - 1):
+            vb *= v
         c = coeffs[m]
-        z += c * wp.pow(u, float(a)) * wp.pow(v, float(b))
+        term_u = wp.where(a > 0, ua * u, 1.0)
+        term_v = wp.where(b > 0, vb * v, 1.0)
+        z += c * term_u * term_v
         if a > 0:
-            zu += c * float(a) * wp.pow(u, float(a - 1)) * wp.pow(v, float(b))
+            zu += c * float(a) * ua * term_v
         if b > 0:
-            zv += c * float(b) * wp.pow(u, float(a)) * wp.pow(v, float(b - 1))
+            zv += c * float(b) * term_u * vb
     phi[i, j, k] = (w - scale * z) / wp.sqrt(1.0 + zu * zu + zv * zv)
 
 

@@ -298,14 +298,15 @@ def flow_step_band(
 
 
 @wp.kernel
-def build_band(
-    phi: wp.array3d[float], width: float, band: wp.array[int], count: wp.array[int]
-):
-    """Append every node with ``|phi| <= width`` to ``band`` (order is not significant)."""
-    i, j, k = wp.tid()
-    if wp.abs(phi[i, j, k]) <= width:
+def build_band(phi: wp.array[float], width: float, band: wp.array[int], count: wp.array[int]):
+    """Append every node with ``|phi| <= width`` to ``band`` (``phi`` flattened, C order).
+
+    The order of the list is not significant (on the CPU it comes out in index order).
+    """
+    t = wp.tid()
+    if wp.abs(phi[t]) <= width:
         slot = wp.atomic_add(count, 0, 1)
-        band[slot] = (i * phi.shape[1] + j) * phi.shape[2] + k
+        band[slot] = t
 
 
 @wp.kernel
@@ -447,8 +448,10 @@ def launch_flow_step_band(
 def launch_build_band(phi: wp.array, band: wp.array, count: wp.array, *, width: float) -> None:
     """Collect the nodes with ``|phi| <= width`` into ``band``; their number into ``count``."""
     count.zero_()
-    wp.launch(build_band, dim=phi.shape, inputs=[phi, float(width)], outputs=[band, count],
-              device=phi.device)
+    # A 1-D launch over the flattened array: on the CPU a 3-D launch costs ~18 ns a thread.
+    flat = phi.flatten()
+    wp.launch(build_band, dim=flat.shape[0], inputs=[flat, float(width)],
+              outputs=[band, count], device=phi.device)
 
 
 def launch_init_flow_step(

@@ -38,6 +38,9 @@ BAND_MODES = {"axis": 0, "gradient": 1}
 """Band initialisations accepted by :class:`Redistancer` and their kernel codes."""
 
 METHODS = ("auto", "serial", "planes")
+
+BAND_PASSES = 8
+"""Default relaxation passes of :meth:`Redistancer.reinitialize_band`."""
 """Sweep methods accepted by :class:`Redistancer`."""
 
 # flags per node: bit 0 inside (phi < 0); bit 1 frozen (a band node, kept by the sweeps);
@@ -388,6 +391,99 @@ def apply_sign_kernel(
             phi[i, j, k] = v
 
 
+@wp.func
+def _band_node(band: wp.array[int], count: wp.array[int], s: int, reverse: int,
+               shape: wp.vec3i) -> wp.vec3i:
+    """Node of slot ``s`` of a band list (counted from its end when ``reverse``), or -1s."""
+    n = count[0]
+    if s >= n:
+        return wp.vec3i(-1, -1, -1)
+    t = band[wp.where(reverse == 1, n - 1 - s, s)]
+    plane = shape[1] * shape[2]
+    return wp.vec3i(t // plane, (t // shape[2]) % shape[1], t % shape[2])
+
+
+@wp.kernel
+def band_init_kernel(
+    phi: wp.array3d[float],
+    band: wp.array[int],
+    count: wp.array[int],
+    mode: int,
+    cap: float,
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    frozen: wp.array[wp.int32],
+):
+    """Freeze the band nodes next to a sign change; start the others at ``cap`` (index units)."""
+    s = wp.tid()
+    n = _band_node(band, count, s, 0, wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    if n[0] < 0:
+        return
+    i = n[0]
+    j = n[1]
+    k = n[2]
+    dist = _band_distance(phi, i, j, k, mode)
+    f = wp.int32(0)
+    if phi[i, j, k] < 0.0:
+        f = _INSIDE
+    if dist < BIG:
+        f = f + _FROZEN
+        d[i, j, k] = dist
+        wp.atomic_add(frozen, 0, 1)
+    else:
+        f = f + _ACTIVE
+        d[i, j, k] = cap
+    flags[i, j, k] = wp.uint8(f)
+
+
+@wp.kernel
+def band_sweep_kernel(
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    band: wp.array[int],
+    count: wp.array[int],
+    reverse: int,
+):
+    """One relaxation pass over the band: Godunov updates of its active, unfrozen nodes.
+
+    On the CPU the pass is a Gauss-Seidel sweep in index order (or its reverse). On CUDA the
+    threads race, but every update only lowers a value toward the same fixed point, so
+    enough passes reach it in any order. Nodes off the band read as ``BIG``: never upwind.
+    """
+    s = wp.tid()
+    n = _band_node(band, count, s, reverse, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
+    if n[0] < 0:
+        return
+    f = int(flags[n[0], n[1], n[2]])
+    if (f & (_ACTIVE + _FROZEN)) != _ACTIVE:
+        return
+    flags[n[0], n[1], n[2]] = wp.uint8(f - _ACTIVE)
+    _visit_distance(d, flags, n[0], n[1], n[2])
+
+
+@wp.kernel
+def band_sign_kernel(
+    d: wp.array3d[float],
+    flags: wp.array3d[wp.uint8],
+    band: wp.array[int],
+    count: wp.array[int],
+    frozen: wp.array[wp.int32],
+    h: float,
+    phi: wp.array3d[float],
+):
+    """Write the signed distance back into the band's nodes (nothing if nothing was frozen)."""
+    s = wp.tid()
+    if frozen[0] == 0:
+        return
+    n = _band_node(band, count, s, 0, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
+    if n[0] < 0:
+        return
+    v = d[n[0], n[1], n[2]] * h
+    if int(flags[n[0], n[1], n[2]]) & _INSIDE:
+        v = -v
+    phi[n[0], n[1], n[2]] = v
+
+
 @wp.kernel
 def clear_kernel(chunk: int, pts: PointSet, out: wp.array3d[float], flags: wp.array3d[wp.uint8]):
     """Start every node with no nearest point, active and unfrozen; ``out`` at BIG."""
@@ -600,6 +696,59 @@ class Redistancer:
             outputs=[phi],
             device=self.device,
         )
+        return self.band_count
+
+    def reinitialize_band(
+        self,
+        phi: wp.array3d,
+        band: wp.array,
+        count: wp.array,
+        *,
+        size: int,
+        width: float,
+        passes: int | None = None,
+    ) -> wp.array:
+        """Reset the nodes of a narrow band of ``phi`` to the signed distance, in place.
+
+        Only the band's nodes are read as unknowns and written; every other node is left as
+        it is and seen as far away. Within the band the result is the fast-sweeping one, for
+        nodes whose nearest surface point the band connects them to (all of them but a thin
+        shell at the band's edge, when ``width`` exceeds the band's half-width).
+
+        Args:
+            phi: Level set of shape ``shape``, float32, on this device.
+            band: Linear indices of the band's nodes.
+            count: One int: how many entries of ``band`` are valid.
+            size: Threads to launch: the band's size if known on the host, else the capacity
+                of ``band`` (threads past ``count`` return at once).
+            width: Start value of the band's unknown nodes, in voxel widths (above the band's
+                half-width).
+            passes: Relaxation passes over the band, alternately forward and backward. On the
+                octant at 64^3 with ``width=8``, 8 passes reach the full reinitialisation's
+                values within 4 h of the surface to 1e-6 h (4 passes: 8e-4 h).
+
+        Returns:
+            :attr:`band_count`: the number of frozen nodes (0: no zero crossing in the band,
+            ``phi`` unchanged).
+        """
+        self._check(phi, "phi")
+        if passes is None:
+            passes = BAND_PASSES
+        self.band_count.zero_()
+        self.distance.fill_(float(BIG))
+        self.flags.zero_()
+        if size == 0:
+            return self.band_count
+        wp.launch(band_init_kernel, dim=size,
+                  inputs=[phi, band, count, BAND_MODES[self.band], float(width)],
+                  outputs=[self.distance, self.flags, self.band_count], device=self.device)
+        for p in range(passes):
+            wp.launch(band_sweep_kernel, dim=size,
+                      inputs=[self.distance, self.flags, band, count, p % 2],
+                      device=self.device)
+        wp.launch(band_sign_kernel, dim=size,
+                  inputs=[self.distance, self.flags, band, count, self.band_count,
+                          self.spacing], outputs=[phi], device=self.device)
         return self.band_count
 
     def point_distance(
