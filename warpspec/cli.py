@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import csv
-import glob
 import json
 import math
 import os
@@ -30,6 +29,18 @@ import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from ._cli_common import (
+    atomic_write,
+    finite,
+    input_file,
+    non_negative,
+    non_negative_int,
+    output_path,
+    positive,
+    positive_int,
+    remove_temps,
+    temp_path,
+)
 from .errors import ReconstructionError, SceneError
 
 __all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"]
@@ -62,31 +73,6 @@ def _version() -> str:
 # Writing outputs
 
 
-def _temp_path(path: Path) -> Path:
-    """A hidden temporary name next to ``path`` that keeps its extension."""
-    return path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
-
-
-def _remove_temps(tmp: Path) -> None:
-    """Remove ``tmp`` and anything a writer derived from its name (``tmp.part``...)."""
-    pattern = glob.escape(str(tmp.with_suffix(""))) + "*"
-    for name in glob.glob(pattern):
-        with contextlib.suppress(OSError):
-            os.unlink(name)
-
-
-def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
-    """Call ``write(tmp_path)`` then rename the temporary file onto ``path``.
-
-    An interrupted run never leaves a half-written file at ``path``, nor a temporary file.
-    """
-    path = Path(path)
-    tmp = _temp_path(path)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        _remove_temps(tmp)
 
 
 class _Outputs:
@@ -96,7 +82,7 @@ class _Outputs:
         self.staged: list[tuple[Path, Path]] = []
 
     def stage(self, path: Path, write: Callable[[Path], object]) -> None:
-        tmp = _temp_path(path)
+        tmp = temp_path(path)
         self.staged.append((tmp, path))
         try:
             write(tmp)
@@ -113,7 +99,7 @@ class _Outputs:
 
     def discard(self) -> None:
         for tmp, _ in self.staged:
-            _remove_temps(tmp)
+            remove_temps(tmp)
         self.staged.clear()
 
 
@@ -154,22 +140,6 @@ def write_mesh(path: Path, mesh) -> None:
 # Checking arguments
 
 
-def _output(path: str, allowed: Sequence[str], flag: str) -> Path:
-    """An output path with a known extension in a folder that exists and can be written."""
-    p = Path(path)
-    if p.suffix.lower() not in allowed:
-        raise SceneError(
-            f"{flag}: {path!r} has an unsupported extension; use one of {', '.join(allowed)}"
-        )
-    parent = p.parent
-    if not parent.is_dir():
-        raise SceneError(f"{flag}: the folder {str(parent)!r} does not exist")
-    if p.is_dir():
-        raise SceneError(f"{flag}: {path!r} is a folder, expected a file name")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise SceneError(f"{flag}: the folder {str(parent)!r} is not writable")
-    return p
-
 
 def _distinct(outputs: dict[str, Path | None]) -> None:
     seen: dict[Path, str] = {}
@@ -181,17 +151,6 @@ def _distinct(outputs: dict[str, Path | None]) -> None:
             raise SceneError(f"{flag}: {str(path)!r} is also the file of {seen[key]}")
         seen[key] = flag
 
-
-def _input_file(path: str, flag: str) -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise SceneError(f"{flag}: no such file {path!r}")
-    if p.is_dir():
-        hint = ""
-        if (p / "cameras.txt").exists() or (p / "cameras.bin").exists():
-            hint = "; for a COLMAP model, make a scene file with 'warpspec import-colmap' first"
-        raise SceneError(f"{flag}: {path!r} is a folder, expected a file{hint}")
-    return p
 
 
 def _flag_message(exc: SceneError) -> SceneError:
@@ -287,14 +246,14 @@ def _fmt(value: float, spec: str) -> str:
 
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     # Every argument is checked before the scene is read, and the scene before any work.
-    out = _output(args.output, MESH_FORMATS, "--output")
-    metrics = _output(args.metrics, METRIC_FORMATS, "--metrics") if args.metrics else None
-    save_phi = _output(args.save_phi, (".npz",), "--save-phi") if args.save_phi else None
-    render = _output(args.render, PICTURE_FORMATS, "--render") if args.render else None
-    plot = _output(args.plot, PICTURE_FORMATS, "--plot") if args.plot else None
+    out = output_path(args.output, MESH_FORMATS, "--output")
+    metrics = output_path(args.metrics, METRIC_FORMATS, "--metrics") if args.metrics else None
+    save_phi = output_path(args.save_phi, (".npz",), "--save-phi") if args.save_phi else None
+    render = output_path(args.render, PICTURE_FORMATS, "--render") if args.render else None
+    plot = output_path(args.plot, PICTURE_FORMATS, "--plot") if args.plot else None
     _distinct({"--output": out, "--metrics": metrics, "--save-phi": save_phi,
                "--render": render, "--plot": plot})
-    resume = _input_file(args.resume, "--resume") if args.resume else None
+    resume = input_file(args.resume, "--resume") if args.resume else None
     if render is not None or plot is not None:
         from .plots import require_matplotlib
 
@@ -302,7 +261,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     if resume is not None and args.resolution is not None:
         warnings.warn("--resolution is ignored with --resume: the saved grid is used",
                       stacklevel=1)
-    scene_path = _input_file(args.scene, "scene")
+    scene_path = input_file(args.scene, "scene")
 
     from .scene import Scene
 
@@ -388,7 +347,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
 
 def _cmd_import_colmap(args: argparse.Namespace) -> int:
-    out = _output(args.output, SCENE_FORMATS, "--output")
+    out = output_path(args.output, SCENE_FORMATS, "--output")
     from .colmap import import_colmap, parse_light
 
     light = parse_light(args.light, field="--light") if args.light is not None else None
@@ -447,49 +406,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
 # Argument types and the parser
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
-def _non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
-    return value
 
-
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    value = _finite(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
-    return value
-
-
-def _positive(text: str) -> float:
-    value = _finite(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
-    return value
 
 
 def _points_choice(text: str) -> str | list[int]:
@@ -525,18 +444,18 @@ def build_parser() -> argparse.ArgumentParser:
                                    "model with 'warpspec import-colmap'")
     rec.add_argument("-o", "--output", required=True,
                      help=f"mesh to write; format by extension ({', '.join(MESH_FORMATS)})")
-    rec.add_argument("--resolution", type=_positive_int, default=None,
+    rec.add_argument("--resolution", type=positive_int, default=None,
                      help="cells along the longest side of the domain (default 64)")
-    rec.add_argument("--iterations", type=_positive_int, default=300,
+    rec.add_argument("--iterations", type=positive_int, default=300,
                      help="iterations of the flow (default 300)")
-    rec.add_argument("--alpha", type=_non_negative, default=0.01,
+    rec.add_argument("--alpha", type=non_negative, default=0.01,
                      help="weight of the smoothness term (default 0.01)")
-    rec.add_argument("--bulge", type=_finite, default=0.0,
+    rec.add_argument("--bulge", type=finite, default=0.0,
                      help="bend the initial plane toward the cameras by this times the "
                           "distance to the nearest point (default 0)")
-    rec.add_argument("--bulge-cap", type=_positive, default=None,
+    rec.add_argument("--bulge-cap", type=positive, default=None,
                      help="cap on that distance, in voxel widths (default: none)")
-    rec.add_argument("--reinit-every", type=_non_negative_int, default=10,
+    rec.add_argument("--reinit-every", type=non_negative_int, default=10,
                      help="reinitialise to a signed distance every N iterations, 0 never "
                           "(default 10)")
     rec.add_argument("--device", default=None,
@@ -572,9 +491,9 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--points", type=_points_choice, default="all",
                      help="3D points to use as constraints: all, none, or POINT3D_IDs "
                           "12,40,41 (default all)")
-    imp.add_argument("--max-points", type=_non_negative_int, default=None,
+    imp.add_argument("--max-points", type=non_negative_int, default=None,
                      help="keep at most this many points, those of least reprojection error")
-    imp.add_argument("--domain", type=_finite, nargs=6, default=None,
+    imp.add_argument("--domain", type=finite, nargs=6, default=None,
                      metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
                      help="box to reconstruct in; points outside it are dropped")
     imp.add_argument("--pixel-convention", choices=["colmap", "index"], default="colmap",

@@ -11,13 +11,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
-from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
+from ._cli_common import atomic_write, finite, input_file, integer, output_path
 from .errors import SceneError
 
 __all__ = ["EVALUATE_DEFINITIONS", "add_parsers"]
@@ -59,56 +57,15 @@ How each figure is defined:
 # --------------------------------------------------------------------------------------------
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
-def _output_path(text: str, flag: str, suffixes: tuple[str, ...]) -> Path:
-    path = Path(text)
-    if path.suffix.lower() not in suffixes:
-        raise SceneError(f"{flag}: {text!r} has an unsupported extension; use one of "
-                         f"{', '.join(suffixes)}")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise SceneError(f"{flag}: the folder {str(parent)!r} does not exist")
-    return path
 
-
-def _input_path(text: str, flag: str) -> Path:
-    path = Path(text)
-    if not path.is_file():
-        raise SceneError(f"{flag}: no such file {text!r}")
-    return path
-
-
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return value
-
-
-def _integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
 def _load_mesh(text: str, flag: str):
     import trimesh
 
-    path = _input_path(text, flag)
+    path = input_file(text, flag)
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
@@ -121,7 +78,7 @@ def _load_mesh(text: str, flag: str):
 
 
 def _load_truth_json(text: str, flag: str) -> dict:
-    path = _input_path(text, flag)
+    path = input_file(text, flag)
     try:
         data = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -163,9 +120,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.name not in scene_names():
         raise SceneError(f"NAME: unknown scene {args.name!r}; expected one of "
                          f"{', '.join(scene_names())}")
-    out = _output_path(args.output, "--output", (".json",))
-    truth = _output_path(args.truth, "--truth", MESH_FORMATS) if args.truth else None
-    truth_json = (_output_path(args.truth_json, "--truth-json", (".json",))
+    out = output_path(args.output, (".json",), "--output")
+    truth = output_path(args.truth, MESH_FORMATS, "--truth") if args.truth else None
+    truth_json = (output_path(args.truth_json, (".json",), "--truth-json")
                   if args.truth_json else None)
     if args.noise < 0:
         raise SceneError(f"--noise: must be a non-negative number of pixels, got {args.noise:g}")
@@ -178,15 +135,15 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise SceneError("--output, --truth and --truth-json must name different files")
 
     synthetic = make_scene(args.name, noise=args.noise, outliers=args.outliers, seed=args.seed)
-    _atomic_write(out, lambda tmp: synthetic.to_json(tmp))
+    atomic_write(out, lambda tmp: synthetic.to_json(tmp))
     written = [str(out)]
     if truth is not None:
         mesh = synthetic.truth_mesh()
-        _atomic_write(truth, lambda tmp: mesh.export(tmp, file_type=truth.suffix.lower()[1:]))
+        atomic_write(truth, lambda tmp: mesh.export(tmp, file_type=truth.suffix.lower()[1:]))
         written.append(f"{truth} ({len(mesh.faces)} faces)")
     if truth_json is not None:
         text = json.dumps(synthetic.truth_dict(), indent=1) + "\n"
-        _atomic_write(truth_json, lambda tmp: tmp.write_text(text))
+        atomic_write(truth_json, lambda tmp: tmp.write_text(text))
         written.append(str(truth_json))
     if not args.quiet:
         print(f"{args.name}: {len(synthetic.truth_points)} specularities "
@@ -230,7 +187,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluate import evaluate, truth_region
     from .grid import Grid
 
-    json_out = _output_path(args.json, "--json", (".json",)) if args.json else None
+    json_out = output_path(args.json, (".json",), "--json") if args.json else None
     if args.samples < 100:
         raise SceneError(f"--samples: must be at least 100, got {args.samples}")
     if args.spacing is not None and args.spacing <= 0:
@@ -249,7 +206,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.scene is not None:
         from .scene import Scene
 
-        scene = Scene.load(_input_path(args.scene, "--scene"))
+        scene = Scene.load(input_file(args.scene, "--scene"))
     known = _load_truth_json(args.truth_json, "--truth-json") if args.truth_json else None
 
     spacing = args.spacing
@@ -296,7 +253,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         if result.normal_angles is not None:
             data["normal_angle_deg"]["values"] = [float(a) for a in result.normal_angles]
         text = json.dumps(_clean(data), indent=1) + "\n"
-        _atomic_write(json_out, lambda tmp: tmp.write_text(text))
+        atomic_write(json_out, lambda tmp: tmp.write_text(text))
     return 0
 
 
@@ -336,13 +293,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     synth.add_argument("--truth-json", metavar="FILE", default=None,
                        help="also write the true specular points and normals, the point "
                             "constraints, the clean pixels and the outliers' indices (.json)")
-    synth.add_argument("--noise", type=_finite, default=0.0, metavar="PX",
+    synth.add_argument("--noise", type=finite, default=0.0, metavar="PX",
                        help="standard deviation of Gaussian noise added to each highlight's "
                             "pixel, in pixels (default 0)")
-    synth.add_argument("--outliers", type=_finite, default=0.0, metavar="F",
+    synth.add_argument("--outliers", type=finite, default=0.0, metavar="F",
                        help="fraction of highlights replaced by a pixel drawn uniformly over "
                             "the image (default 0)")
-    synth.add_argument("--seed", type=_integer, default=0, metavar="S",
+    synth.add_argument("--seed", type=integer, default=0, metavar="S",
                        help="seed of the noise and the outliers (default 0)")
     synth.add_argument("--quiet", action="store_true", help="print nothing but errors")
     synth.set_defaults(func=_cmd_synth)
@@ -364,16 +321,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("--truth-json", default=None, metavar="FILE",
                     help="exact true specular points and normals (and point constraints), as "
                          "written by 'warpspec synth --truth-json'; outliers are left out")
-    ev.add_argument("--resolution", type=_integer, default=None, metavar="N",
+    ev.add_argument("--resolution", type=integer, default=None, metavar="N",
                     help="with --scene: h = longest side of the scene's domain / N, the grid "
                          "of 'warpspec reconstruct --resolution N' (default 64)")
-    ev.add_argument("--spacing", type=_finite, default=None, metavar="H",
+    ev.add_argument("--spacing", type=finite, default=None, metavar="H",
                     help="give the voxel width h directly, in world units")
     ev.add_argument("--no-crop", action="store_true",
                     help="measure the whole meshes, not only the region the constraints cover")
-    ev.add_argument("--samples", type=_integer, default=20_000,
+    ev.add_argument("--samples", type=integer, default=20_000,
                     help="area-uniform samples per mesh, on top of its vertices (default 20000)")
-    ev.add_argument("--seed", type=_integer, default=0, help="seed of the sampling (default 0)")
+    ev.add_argument("--seed", type=integer, default=0, help="seed of the sampling (default 0)")
     ev.add_argument("--json", default=None, metavar="FILE",
                     help="also write every figure to this file (.json)")
     ev.set_defaults(func=_cmd_evaluate)

@@ -1,0 +1,134 @@
+"""Pieces shared by the command line's subcommands: argument types, paths, atomic writes."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import glob
+import math
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from .errors import SceneError
+
+__all__ = [
+    "atomic_write",
+    "finite",
+    "input_file",
+    "integer",
+    "non_negative",
+    "non_negative_int",
+    "output_path",
+    "positive",
+    "positive_int",
+    "remove_temps",
+    "temp_path",
+]
+
+def temp_path(path: Path) -> Path:
+    """A hidden temporary name next to ``path`` that keeps its extension."""
+    return path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
+
+
+def remove_temps(tmp: Path) -> None:
+    """Remove ``tmp`` and anything a writer derived from its name (``tmp.part``...)."""
+    pattern = glob.escape(str(tmp.with_suffix(""))) + "*"
+    for name in glob.glob(pattern):
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+
+
+def output_path(path: str, allowed: Sequence[str], flag: str) -> Path:
+    """An output path with a known extension in a folder that exists and can be written."""
+    p = Path(path)
+    if p.suffix.lower() not in allowed:
+        raise SceneError(
+            f"{flag}: {path!r} has an unsupported extension; use one of {', '.join(allowed)}"
+        )
+    parent = p.parent
+    if not parent.is_dir():
+        raise SceneError(f"{flag}: the folder {str(parent)!r} does not exist")
+    if p.is_dir():
+        raise SceneError(f"{flag}: {path!r} is a folder, expected a file name")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SceneError(f"{flag}: the folder {str(parent)!r} is not writable")
+    return p
+
+
+def input_file(path: str, flag: str) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise SceneError(f"{flag}: no such file {path!r}")
+    if p.is_dir():
+        hint = ""
+        if (p / "cameras.txt").exists() or (p / "cameras.bin").exists():
+            hint = "; for a COLMAP model, make a scene file with 'warpspec import-colmap' first"
+        raise SceneError(f"{flag}: {path!r} is a folder, expected a file{hint}")
+    return p
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
+    return value
+
+
+def finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def non_negative(text: str) -> float:
+    value = finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return value
+
+
+def positive(text: str) -> float:
+    value = finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return value
+
+
+def integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``.
+
+    On any failure the temporary file (and anything derived from its name) is removed, and a
+    file already at ``path`` is left as it was.
+    """
+    tmp = temp_path(path)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        remove_temps(tmp)
