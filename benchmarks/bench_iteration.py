@@ -8,7 +8,8 @@ hit the surface and the constraints own nodes), in one process and interleaved, 
 - kernel: warpspec's dense fused flow-step kernel alone (``launch_flow_step``) on the same state;
 - iteration: ``Reconstructor.step()`` as the solver runs it (ray intersection, constraint
   normals, flow step, and the reinitialisation every ``reinit_every`` steps, amortised): a block
-  of a multiple of ``reinit_every`` steps, divided by its length.
+  of a multiple of ``reinit_every * FULL_REINIT_EVERY`` steps (a whole cycle of band-only and
+  full reinitialisations), divided by its length.
 
 A second table splits the iteration into its parts and gives the cost of ``measures()``, which
 ``Reconstructor.run`` (and the command line) call every iteration by default.
@@ -33,6 +34,8 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
 from numpy_step import OCTANT, dense_step, flow_inputs, flow_step  # noqa: E402
+
+from warpspec.solver import FULL_REINIT_EVERY  # noqa: E402
 
 CPU_SIZES = (64, 128, 256)
 CUDA_SIZES = (64, 128, 256, 512)
@@ -77,7 +80,9 @@ def measure(size: int, *, device, repeats: int, iterations: int | None, breakdow
     owner, normals, gauss = (a.numpy() for a in flow_inputs(solver))
     phi = solver.phi.numpy()
     out = wp.empty(grid.shape, dtype=float, device=device)
-    every = max(solver.reinit_every, 1)
+    # A block covers a whole cycle of reinitialisations: band-only ones and the full one that
+    # comes every FULL_REINIT_EVERY-th time, so the amortised cost counts both.
+    every = max(solver.reinit_every, 1) * FULL_REINIT_EVERY
 
     # warm up every launch path (first launches load modules), then calibrate batch sizes
     dense_step(solver, out)
