@@ -190,9 +190,9 @@ class _Progress:
             self.last = m["iteration"]
         self.bar.update(m["iteration"] - self.last)
         self.last = m["iteration"]
-        self.bar.set_postfix({"normal": f"{m['normal_error']:.4f}",
-                              "point": f"{m['point_error']:.3f}h", "misses": m["misses"]},
-                             refresh=False)
+        self.bar.set_postfix({"normal": _fmt(m["normal_error"], ".3g"),
+                              "point": _fmt(m["point_error"], ".3g") + "h",
+                              "misses": m["misses"]}, refresh=False)
 
     def close(self) -> None:
         if self.bar is not None:
