@@ -324,6 +324,8 @@ class Reconstructor:
         self._good = wp.zeros(shape, dtype=float, device=d)  # last good phi; scratch at start
         self._good_iteration = 0
         self._reinit_count = 0
+        self._phi_version = 0  # bumped whenever phi changes; the hits know which they meet
+        self._hits_version = -1
         # The ownership pass and the redistancer never run at once: they share a scratch field.
         self._owner_dist = self._redistancer.distance
         self._band = None
@@ -440,6 +442,12 @@ class Reconstructor:
         launch_claim_normals(self._hits, self._active, self._owner_dist, self._owner,
                              origin=self._origin, spacing=self.grid.spacing,
                              radius=self.normal_radius * self.grid.spacing)
+        self._hits_version = self._phi_version
+
+    def _current_hits(self) -> None:
+        """Intersect the rays unless they already meet this ``phi`` (measures, then a step)."""
+        if self._hits_version != self._phi_version:
+            self._intersect()
 
     def _rebuild_band(self) -> None:
         """Collect the narrow band around the current zero set.
@@ -477,6 +485,7 @@ class Reconstructor:
             self._redistancer.reinitialize_band(self.phi, self._band, self._band_count,
                                                 size=self._band_size,
                                                 width=self.narrow_band + 2.0)
+        self._phi_version += 1
         self._rebuild_band()
         wp.copy(self._good, self.phi)
         self._good_iteration = self.iteration
@@ -496,6 +505,7 @@ class Reconstructor:
         wp.copy(self.phi, self._good)
         wp.copy(self._tmp, self._good)
         self.iteration = self._good_iteration
+        self._phi_version += 1
         self.history = [m for m in self.history if m["iteration"] <= self.iteration]
         self._rebuild_band()
         raise ReconstructionError(
@@ -527,8 +537,11 @@ class Reconstructor:
                 graph = self._graphs[key] = capture.graph
             wp.capture_launch(graph)
         else:
-            self._launch_step(normal, smooth, points, intersect)
+            if intersect:
+                self._current_hits()
+            self._launch_step(normal, smooth, points, False)
         self.phi, self._tmp = self._tmp, self.phi
+        self._phi_version += 1
         self.iteration += 1
         if self.reinit_every and self.iteration % self.reinit_every == 0:
             self._reinitialize()
@@ -567,7 +580,7 @@ class Reconstructor:
             ReconstructionError: If ``phi`` holds a non-finite value.
         """
         if intersect:
-            self._intersect()
+            self._current_hits()
         s = self._reduce()
         self._check_finite(s)
         active = int(s[MEASURE_SLOTS["active"]])
@@ -638,7 +651,7 @@ class Reconstructor:
             ReconstructionError: If the zero set has left the domain (no surface to mesh).
         """
         phi = self.phi.numpy().copy()
-        self._intersect()
+        self._current_hits()
         hits = self._hits.numpy().astype(np.float64)
         hits[self._active.numpy() == 0] = np.nan
         mesh = extract_mesh(phi, self.grid)
