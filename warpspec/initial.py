@@ -42,9 +42,6 @@ class HeightFit:
         self.powers = np.asarray(powers, dtype=np.int32)
         self.coeffs = np.asarray(coeffs, dtype=np.float64)
 
-    def local(self, x: np.ndarray) -> np.ndarray:
-        """Plane coordinates ``(u, v, w)`` of world points."""
-        return (np.asarray(x, dtype=np.float64) - self.point) @ self.frame.T
 
 
 def _design(uv: np.ndarray, powers: np.ndarray, scale: float, derivative: int | None):

@@ -372,9 +372,9 @@ class Reconstructor:
         launch_plane(self.phi, origin=self._origin, spacing=h, point=tuple(point),
                      normal=tuple(normal))
         have_points = self.scene.num_points > 0
+        cap = None if self.bulge_cap is None else self.bulge_cap * h
         if init_iterations and have_points:
             dist = self._owner_dist
-            cap = None if self.bulge_cap is None else self.bulge_cap * h
             self._point_distance(dist, cap)
             dt = 0.5 * h * h / (6.0 * max(float(dist.numpy().max()), h))
             for _ in range(init_iterations):
@@ -382,7 +382,7 @@ class Reconstructor:
                 self.phi, self._tmp = self._tmp, self.phi
             self._redistancer.reinitialize(self.phi)
         if self.bulge != 0.0 and have_points:
-            cap = None if self.bulge_cap is None else self.bulge_cap * h
+            # The scratch field was redistanced since: the distance is computed again.
             self._point_distance(self._owner_dist, cap)
             launch_bend(self.phi, self._owner_dist, self._tmp, spacing=h, c=self.bulge)
             self.phi, self._tmp = self._tmp, self.phi
@@ -404,8 +404,8 @@ class Reconstructor:
         scale = 0.5 * float(np.max(self.grid.upper - self.grid.origin))
         d = self.device
         previous, fitted = self._good, self._tmp
+        self._intersect()  # each accepted round ends with the rays intersected again
         for round_ in range(self.fit_iterations):
-            self._intersect()
             ok = self._active.numpy() == 1
             if ok.sum() < 3:
                 break

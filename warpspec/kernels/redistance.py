@@ -26,6 +26,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..errors import SceneError
+from .differences import unflatten
 
 wp.set_module_options({"enable_backward": False})
 
@@ -398,9 +399,7 @@ def _band_node(band: wp.array[int], count: wp.array[int], s: int, reverse: int,
     n = count[0]
     if s >= n:
         return wp.vec3i(-1, -1, -1)
-    t = band[wp.where(reverse == 1, n - 1 - s, s)]
-    plane = shape[1] * shape[2]
-    return wp.vec3i(t // plane, (t // shape[2]) % shape[1], t % shape[2])
+    return unflatten(band[wp.where(reverse == 1, n - 1 - s, s)], shape)
 
 
 @wp.kernel
