@@ -68,25 +68,23 @@ def input_file(path: str, flag: str) -> Path:
     return p
 
 
-def positive_int(text: str) -> int:
+def _int_at_least(text: str, low: int | None, what: str) -> int:
+    """An integer not below ``low`` (no bound when ``None``); ``what`` names it in errors."""
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if low is not None and value < low:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
     return value
+
+
+def positive_int(text: str) -> int:
+    return _int_at_least(text, 1, "a positive integer")
 
 
 def non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
-    return value
+    return _int_at_least(text, 0, "a non-negative integer")
 
 
 def finite(text: str) -> float:
@@ -114,10 +112,7 @@ def positive(text: str) -> float:
 
 
 def integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    return _int_at_least(text, None, "an integer")
 
 
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
