@@ -12,9 +12,11 @@ from warpspec.kernels.constraints import (
     launch_plane,
 )
 from warpspec.kernels.differences import (
+    launch_build_band,
     launch_central_gradient,
     launch_curvature_term,
     launch_flow_step,
+    launch_flow_step_band,
     launch_upwind_gradient_norm,
 )
 from warpspec.kernels.rays import launch_intersect
@@ -230,6 +232,31 @@ def test_point_decay_is_exact(device):
     launch_flow_step(to_device(phi0, device), owner, normals, to_device(gauss, device), out,
                      spacing=grid.spacing, dt=dt, normal_weight=0.0, alpha=0.0, point_weight=w)
     np.testing.assert_allclose(out.numpy(), phi0 * np.exp(-w * gauss * dt), rtol=2e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("shape", [(9, 7, 5), (3, 1030, 4)], ids=["bit-packed", "linear"])
+def test_band_step_equals_the_dense_step_on_the_band_and_leaves_the_rest(device, shape):
+    # (3, 1030, 4) is too wide to bit-pack a node: the band stores linear indices instead
+    rng = np.random.default_rng(3)
+    phi0 = rng.normal(size=shape).astype(np.float32)
+    gauss = rng.uniform(0, 2, size=shape).astype(np.float32)
+    owner = wp.full(shape, NO_OWNER, dtype=int, device=device)
+    normals = wp.zeros(0, dtype=wp.vec3, device=device)
+    phi = to_device(phi0, device)
+    band = wp.zeros(phi0.size, dtype=int, device=device)
+    count = wp.zeros(1, dtype=int, device=device)
+    launch_build_band(phi, band, count, width=0.5)
+    inside = np.abs(phi0) <= 0.5
+    assert count.numpy()[0] == inside.sum()
+    weights = dict(spacing=0.1, dt=1e-3, alpha=0.3, point_weight=5.0)
+    dense = wp.zeros(shape, dtype=float, device=device)
+    launch_flow_step(phi, owner, normals, to_device(gauss, device), dense, **weights)
+    sparse = wp.full(shape, 7.0, dtype=float, device=device)
+    launch_flow_step_band(phi, owner, normals, to_device(gauss, device), band, count, sparse,
+                          size=phi0.size, **weights)
+    got = sparse.numpy()
+    np.testing.assert_array_equal(got[inside], dense.numpy()[inside])
+    assert np.all(got[~inside] == 7.0)
 
 
 def test_rays_hit_a_sphere_within_a_twentieth_of_a_cell_and_misses_are_flagged(device):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .differences import central_gradient, unflatten, unit_normal
+from .differences import band_node, central_gradient, unit_normal
 
 wp.set_module_options({"enable_backward": False})
 
@@ -267,7 +267,7 @@ def measure_band(
     s = wp.tid()
     if s >= count[0]:
         return
-    n = unflatten(band[s], wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    n = band_node(band[s], wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
     measure_node(phi, owner, normals, n[0], n[1], n[2], h, sums)
 
 

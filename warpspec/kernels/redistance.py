@@ -26,7 +26,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..errors import SceneError
-from .differences import unflatten
+from .differences import band_node
 
 wp.set_module_options({"enable_backward": False})
 
@@ -399,7 +399,7 @@ def _band_node(band: wp.array[int], count: wp.array[int], s: int, reverse: int,
     n = count[0]
     if s >= n:
         return wp.vec3i(-1, -1, -1)
-    return unflatten(band[wp.where(reverse == 1, n - 1 - s, s)], shape)
+    return band_node(band[wp.where(reverse == 1, n - 1 - s, s)], shape)
 
 
 @wp.kernel
@@ -716,7 +716,8 @@ class Redistancer:
 
         Args:
             phi: Level set of shape ``shape``, float32, on this device.
-            band: Linear indices of the band's nodes.
+            band: The band's nodes, as :func:`~warpspec.kernels.differences.build_band`
+                encodes them.
             count: One int: how many entries of ``band`` are valid.
             size: Threads to launch: the band's size if known on the host, else the capacity
                 of ``band`` (threads past ``count`` return at once).
