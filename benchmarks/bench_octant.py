@@ -5,8 +5,9 @@ process from ``getrusage``), so interpreter start, imports, kernel compilation o
 the set-up, the iterations, marching cubes and writing the mesh all count:
 
 - ``cli``: ``warpspec reconstruct examples/scenes/octant.json -o OUT.ply --bulge 0.5 --quiet``
-  (plus ``--metrics`` to read the final errors, and ``--resolution``/``--iterations``/
-  ``--device`` when they differ from the defaults);
+  (plus ``--metrics M.csv --measure-every 0`` to read the final errors: the measures of the
+  start and the end, as a run without ``--metrics`` reduces them; and ``--resolution``/
+  ``--iterations``/``--device`` when they differ from the defaults);
 - ``api``: ``Reconstructor(scene, resolution=64, bulge=0.5)``, ``.run(300)``, ``.result()``
   and ``mesh.export`` in a short script, which also reports its own phases.
 
@@ -66,7 +67,8 @@ def _warpspec_command() -> list[str]:
 def cli_command(args: argparse.Namespace, output: Path, metrics: Path) -> list[str]:
     """The command line that the ``cli`` rows time."""
     cmd = _warpspec_command() + ["reconstruct", str(OCTANT.relative_to(ROOT)), "-o", str(output),
-                                 "--bulge", str(args.bulge), "--quiet", "--metrics", str(metrics)]
+                                 "--bulge", str(args.bulge), "--quiet", "--metrics", str(metrics),
+                                 "--measure-every", "0"]
     if args.resolution != 64:
         cmd += ["--resolution", str(args.resolution)]
     if args.iterations != 300:

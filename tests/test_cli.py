@@ -191,6 +191,20 @@ def test_version_in_a_subprocess():
     assert done.stdout.strip() == "warpspec 0.1.0"
 
 
+def test_the_program_exits_with_the_status_and_complete_outputs(tmp_path):
+    # the program skips the collector's final pass at exit: statuses and files must survive
+    prog = [sys.executable, "-m", "warpspec", "reconstruct"]
+    done = subprocess.run([*prog, str(tmp_path / "none.json"), "-o", str(tmp_path / "x.ply")],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2 and "error:" in done.stderr
+    done = subprocess.run([*prog, str(OCTANT), "-o", str(tmp_path / "x.ply"), *FAST,
+                           "--metrics", str(tmp_path / "m.csv")],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    assert len(trimesh.load(tmp_path / "x.ply").faces) > 100
+    assert len((tmp_path / "m.csv").read_text().splitlines()) == 14  # header, start, 12
+
+
 # -- good runs --------------------------------------------------------------------------------
 
 
@@ -228,6 +242,13 @@ def test_metrics_have_one_row_per_iteration_with_the_history_keys(first_run, cap
     assert [r["iteration"] for r in data] == list(range(13))
     assert all(tuple(r) == MEASURE_KEYS for r in data)
     assert data[-1]["active"] + data[-1]["misses"] == 24
+    # --measure-every thins the records; the start and the last iteration are always kept
+    status, err = run(capsys, "reconstruct", OCTANT, "-o", tmp_path / "x.ply", *FAST,
+                      "--metrics", tmp_path / "m5.json", "--measure-every", "5")
+    assert status == 0, err
+    data5 = json.loads((tmp_path / "m5.json").read_text())
+    assert [r["iteration"] for r in data5] == [0, 5, 10, 12]
+    assert data5[-1] == {**data[-1], "seconds": data5[-1]["seconds"]}
 
 
 def test_save_phi_then_resume_continues_from_the_saved_state(first_run, capsys, tmp_path):

@@ -607,14 +607,20 @@ class Reconstructor:
         self,
         iterations: int,
         *,
-        measure_every: int = 1,
+        measure_every: int = 0,
         callback: Callable[[dict], None] | None = None,
     ) -> list[dict]:
         """Advance ``iterations`` steps, recording measures every ``measure_every`` of them.
 
+        The measures of the start (when ``history`` is empty) and of the last iteration are
+        always recorded.
+
         Args:
             iterations: Number of iterations.
-            measure_every: Record the measures every this many iterations (0: only the last).
+            measure_every: Record the measures every this many iterations (0, the default:
+                only the last). Each record is a reduction over the narrow band and a
+                synchronisation with the device: about 15% of an iteration at 64^3 on the
+                CPU.
             callback: Called with each recorded measure dict (progress display).
 
         Returns:
