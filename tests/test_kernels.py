@@ -4,11 +4,14 @@ import numpy as np
 import pytest
 import warp as wp
 
+from warpspec.grid import Grid
+from warpspec.initial import HeightFit, monomials, plane_frame
 from warpspec.kernels.constraints import (
     NO_OWNER,
     launch_bend,
     launch_claim_normals,
     launch_gaussian,
+    launch_height_field,
     launch_plane,
 )
 from warpspec.kernels.differences import (
@@ -343,3 +346,26 @@ def test_plane_and_bend_keep_the_zero_set_on_the_points(device):
     bent = interior(out.numpy(), 1)
     expected = interior(plane - 0.5 * dist.numpy(), 1)
     np.testing.assert_allclose(bent, expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("degree", [0, 1, 4])
+def test_height_field_matches_the_monomial_sum(device, degree):
+    # an uneven box, so that swapped axes would show; the NumPy side sums monomials directly
+    grid = Grid.from_bounds(np.array([-1.0, -0.5, -0.8]), np.array([1.0, 0.7, 0.6]),
+                            resolution=24)
+    frame = plane_frame(np.array([0.3, -0.4, 1.0]))
+    powers = monomials(degree)
+    coeffs = np.random.default_rng(degree).normal(scale=0.2, size=len(powers))
+    fit = HeightFit(np.array([0.1, 0.05, -0.2]), frame, 0.9, powers, coeffs)
+    phi = wp.zeros(grid.shape, dtype=float, device=device)
+    launch_height_field(phi, wp.array(fit.coefficient_matrix().astype(np.float32),
+                                      dtype=float, device=device),
+                        origin=origin_of(grid), spacing=grid.spacing,
+                        point=tuple(fit.point), axes=tuple(tuple(r) for r in frame),
+                        scale=fit.scale)
+    nodes = np.stack(grid.coordinates(), axis=-1).reshape(-1, 3)
+    np.testing.assert_allclose(phi.numpy().reshape(-1), fit.evaluate(nodes), atol=2e-5)
+    if degree == 0:  # a plane offset along its normal by scale * c: the exact distance
+        exact = (nodes - fit.point) @ frame[2] - fit.scale * coeffs[0]
+        np.testing.assert_allclose(phi.numpy().reshape(-1), exact, atol=1e-5)
+

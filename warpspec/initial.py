@@ -42,6 +42,24 @@ class HeightFit:
         self.powers = np.asarray(powers, dtype=np.int32)
         self.coeffs = np.asarray(coeffs, dtype=np.float64)
 
+    def coefficient_matrix(self) -> np.ndarray:
+        """The coefficients as a square matrix ``C[a, b]`` of ``u^a v^b`` (zero where unused)."""
+        top = int(self.powers.max()) if len(self.powers) else 0
+        out = np.zeros((top + 1, top + 1))
+        out[self.powers[:, 0], self.powers[:, 1]] = self.coeffs
+        return out
+
+    def evaluate(self, x: np.ndarray) -> np.ndarray:
+        """The first-order signed distance of world points ``x`` (n, 3) to the field."""
+        uvw = (np.asarray(x, dtype=np.float64) - self.point) @ self.frame.T
+        s = uvw[:, :2] / self.scale
+        a, b = self.powers[:, 0], self.powers[:, 1]
+        u, v = s[:, :1], s[:, 1:]
+        z = (u**a * v**b) @ self.coeffs
+        zu = (np.where(a > 0, a * u ** np.maximum(a - 1, 0), 0.0) * v**b) @ self.coeffs
+        zv = (np.where(b > 0, b * v ** np.maximum(b - 1, 0), 0.0) * u**a) @ self.coeffs
+        return (uvw[:, 2] - self.scale * z) / np.sqrt(1.0 + zu**2 + zv**2)
+
 
 
 def _design(uv: np.ndarray, powers: np.ndarray, scale: float, derivative: int | None):

@@ -405,6 +405,7 @@ class Reconstructor:
         d = self.device
         previous, fitted = self._good, self._tmp
         self._intersect()  # each accepted round ends with the rays intersected again
+        changed = False
         for round_ in range(self.fit_iterations):
             ok = self._active.numpy() == 1
             if ok.sum() < 3:
@@ -414,24 +415,28 @@ class Reconstructor:
                                    self._normals.numpy()[ok].astype(np.float64),
                                    degree=min(self.fit_degree, 2 + round_))
             launch_height_field(
-                fitted, wp.array(fit.coeffs.astype(np.float32), dtype=float, device=d),
-                wp.array(fit.powers, dtype=wp.vec2i, device=d), origin=self._origin,
-                spacing=self.grid.spacing, point=tuple(point),
+                fitted, wp.array(fit.coefficient_matrix().astype(np.float32), dtype=float,
+                                 device=d),
+                origin=self._origin, spacing=self.grid.spacing, point=tuple(point),
                 axes=tuple(tuple(r) for r in frame), scale=scale)
             wp.copy(previous, self.phi)
             # Damped fixed point: a fit made from intersections far from the truth can
-            # overshoot until the rays miss; halve the step until no ray is lost.
+            # overshoot until the rays miss; halve the step until no ray is lost. The rays
+            # march by sign in half-cell steps, so the blends need no redistancing until the
+            # last one is kept.
             accepted = False
             for beta in (1.0, 0.5, 0.25, 0.125):
                 launch_blend(previous, fitted, self.phi, beta=beta)
-                self._redistancer.reinitialize(self.phi)
                 self._intersect()
                 if self._active.numpy().sum() >= ok.sum():
-                    accepted = True
+                    accepted = changed = True
                     break
             if not accepted:
                 wp.copy(self.phi, previous)
                 break
+        if changed:
+            self._redistancer.reinitialize(self.phi)
+            self._phi_version += 1
 
     # -- iteration ------------------------------------------------------------------------
 

@@ -182,47 +182,41 @@ def height_field(
     axis_v: wp.vec3,
     normal: wp.vec3,
     scale: float,
-    coeffs: wp.array[float],
-    powers: wp.array[wp.vec2i],
+    coeffs: wp.array2d[float],
     phi: wp.array3d[float],
 ):
     """Signed distance (to first order) to the height field ``w = z(u, v)`` over a plane.
 
-    ``z = scale * sum_m coeffs[m] (u/scale)^a_m (v/scale)^b_m`` in the plane's frame; the value
-    is ``(w - z) / sqrt(1 + |grad z|^2)``, positive on the ``normal`` side.
+    ``z = scale * sum_ab coeffs[a, b] (u/scale)^a (v/scale)^b`` in the plane's frame; the value
+    is ``(w - z) / sqrt(1 + |grad z|^2)``, positive on the ``normal`` side. One thread fills
+    a column of nodes along the last axis; the polynomial and its two partial derivatives
+    are evaluated by nested Horner schemes.
     """
-    i, j, k = wp.tid()
-    d = node_position(origin, h, i, j, k) - point
-    u = wp.dot(d, axis_u) / scale
-    v = wp.dot(d, axis_v) / scale
-    w = wp.dot(d, normal)
-    z = float(0.0)
-    zu = float(0.0)
-    zv = float(0.0)
-    for m in range(coeffs.shape[0]):
-        a = powers[m][0]
-        b = powers[m][1]
-        ua = float(1.0)  # u^(a-1) and v^(b-1) by multiplication: pow is slow on the CPU
-        for _ in range(a - 1):
-            ua *= u
-        vb = float(1.0)
-        for _ in range(b - 1):
-            vb *= v
-        c = coeffs[m]
-        term_u = wp.where(a > 0, ua * u, 1.0)
-        term_v = wp.where(b > 0, vb * v, 1.0)
-        z += c * term_u * term_v
-        if a > 0:
-            zu += c * float(a) * ua * term_v
-        if b > 0:
-            zv += c * float(b) * term_u * vb
-    phi[i, j, k] = (w - scale * z) / wp.sqrt(1.0 + zu * zu + zv * zv)
+    i, j = wp.tid()
+    top = coeffs.shape[0] - 1
+    for k in range(phi.shape[2]):
+        d = node_position(origin, h, i, j, k) - point
+        u = wp.dot(d, axis_u) / scale
+        v = wp.dot(d, axis_v) / scale
+        z = float(0.0)
+        zu = float(0.0)
+        zv = float(0.0)
+        for ia in range(top + 1):
+            a = top - ia
+            p = float(0.0)  # P_a(v) = sum_b coeffs[a, b] v^b, and its derivative
+            dp = float(0.0)
+            for ib in range(top - a + 1):
+                dp = dp * v + p
+                p = p * v + coeffs[a, top - a - ib]
+            zu = zu * u + z
+            z = z * u + p
+            zv = zv * u + dp
+        phi[i, j, k] = (wp.dot(d, normal) - scale * z) / wp.sqrt(1.0 + zu * zu + zv * zv)
 
 
 def launch_height_field(
     phi: wp.array,
     coeffs: wp.array,
-    powers: wp.array,
     *,
     origin: tuple[float, float, float],
     spacing: float,
@@ -232,11 +226,12 @@ def launch_height_field(
 ) -> None:
     """Fill ``phi`` with the height field ``z(u, v)`` over the plane ``(point, axes)``.
 
-    ``axes`` holds the plane's two in-plane unit axes and its unit normal.
+    ``axes`` holds the plane's two in-plane unit axes and its unit normal; ``coeffs`` is the
+    square matrix of :meth:`warpspec.initial.HeightFit.coefficient_matrix` (float32).
     """
-    wp.launch(height_field, dim=phi.shape,
+    wp.launch(height_field, dim=(phi.shape[0], phi.shape[1]),
               inputs=[wp.vec3(*origin), float(spacing), wp.vec3(*point), wp.vec3(*axes[0]),
-                      wp.vec3(*axes[1]), wp.vec3(*axes[2]), float(scale), coeffs, powers],
+                      wp.vec3(*axes[1]), wp.vec3(*axes[2]), float(scale), coeffs],
               outputs=[phi], device=phi.device)
 
 
