@@ -173,6 +173,17 @@ def test_narrow_band_gives_the_dense_result(octant, device):
     assert np.max(np.abs(dense - banded)[near]) <= 1e-4 * h
 
 
+def test_without_reinitialisation_every_node_is_updated(octant):
+    # a band is only rebuilt when phi is redistanced: with reinit_every=0 the step is dense
+    phis = []
+    for band in (None, 4.0):
+        solver = ws.Reconstructor(octant, resolution=24, bulge=0.5, narrow_band=band,
+                                  reinit_every=0, device="cpu")
+        solver.run(30)
+        phis.append(solver.phi.numpy())
+    np.testing.assert_array_equal(phis[0], phis[1])
+
+
 def test_graph_replay_gives_the_launch_by_launch_result(octant, device):
     phis = []
     for graph in (False, True):

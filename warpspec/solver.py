@@ -226,7 +226,9 @@ class Reconstructor:
         margin: Margin around the points when the scene gives no domain, as a fraction of
             the points' longest extent.
         narrow_band: Update only the nodes within this many voxel widths of the zero set
-            (the band is rebuilt at every reinitialisation); ``None`` updates every node.
+            (the band is rebuilt at every reinitialisation, so the zero set must move less
+            than ``narrow_band - 2`` voxels between two); ``None`` updates every node, as
+            does ``reinit_every=0``, which never rebuilds a band.
         graph: Capture each iteration's launches as a Warp graph and replay it; ``None``
             captures on CUDA, where it saves most launch overhead (on the CPU the band's size
             changes at every reinitialisation, and each change costs a new capture).
@@ -332,7 +334,7 @@ class Reconstructor:
         self._band_count = wp.zeros(1, dtype=int, device=d)
         self._band_size = 0
         self.graph = self.device.is_cuda if graph is None else bool(graph)
-        if self.narrow_band is not None:
+        if self.narrow_band is not None and self.reinit_every:
             self._band = wp.zeros(grid.size, dtype=int, device=d)
 
         launch_gaussian(self._points, self._gauss, origin=self._origin, spacing=h,
