@@ -7,6 +7,7 @@ import warp as wp
 from warpspec.grid import Grid
 from warpspec.initial import HeightFit, monomials, plane_frame
 from warpspec.kernels.constraints import (
+    NEIGHBOUR_OWNED,
     NO_OWNER,
     launch_bend,
     launch_claim_normals,
@@ -136,7 +137,17 @@ def test_divergence_of_n_minus_v_is_zero_away_from_constraints_and_exact_at_one(
     node_pos = grid.origin + h * owned
     assert len(owned) >= 1
     assert np.all(np.linalg.norm(node_pos - x, axis=1) <= h * (1 + 1e-6))
-    assert np.all((own == 0) | (own == NO_OWNER))
+    # the unowned six-neighbours of owned nodes, and they alone, carry the neighbour mark
+    marked = np.zeros(grid.shape, dtype=bool)
+    for i, j, k in owned:
+        for axis in range(3):
+            for step in (-1, 1):
+                q = [i, j, k]
+                q[axis] += step
+                marked[tuple(q)] = True
+    marked &= own != 0
+    assert np.array_equal(own == NEIGHBOUR_OWNED, marked)
+    assert np.all((own == 0) | (own == NO_OWNER) | marked)
 
     gauss = wp.zeros(grid.shape, dtype=float, device=device)
     out = wp.zeros(grid.shape, dtype=float, device=device)

@@ -6,7 +6,9 @@
 - The extended normal field ``V`` is held as an ``owner`` index per node: two passes over the
   nodes within ``r_N`` of each ray's intersection pick the nearest intersection with atomic
   minima, first on the distance, then on the ray index among equal distances, so the result
-  does not depend on thread order.
+  does not depend on thread order. The second pass also marks the unowned six-neighbours of
+  each owned node :data:`NEIGHBOUR_OWNED` (an atomic minimum too: any ray index wins over the
+  mark), so that every other node, :data:`NO_OWNER`, provably has no normal term.
 """
 
 from __future__ import annotations
@@ -15,12 +17,13 @@ import math
 
 import warp as wp
 
-from .differences import central_gradient
+from .differences import NEIGHBOUR_OWNED, NO_OWNER, central_gradient
 
 wp.set_module_options({"enable_backward": False})
 
 __all__ = [
     "GAUSSIAN_CUTOFF",
+    "NEIGHBOUR_OWNED",
     "NO_OWNER",
     "launch_bend",
     "launch_blend",
@@ -32,7 +35,6 @@ __all__ = [
 ]
 
 GAUSSIAN_CUTOFF = 5.0
-NO_OWNER = 2**30
 
 
 @wp.func
@@ -151,6 +153,12 @@ def claim_owner(
     k = int(b[2])
     if b[3] == dist[i, j, k]:
         wp.atomic_min(owner, i, j, k, r)
+        for axis in range(3):
+            for side in range(2):
+                n = wp.vec3i(i, j, k)
+                n[axis] = n[axis] + 2 * side - 1
+                if inside(shape, n):
+                    wp.atomic_min(owner, n[0], n[1], n[2], NEIGHBOUR_OWNED)
 
 
 @wp.kernel
@@ -299,7 +307,8 @@ def launch_claim_normals(
 ) -> None:
     """Rebuild ``owner``: each node within ``radius`` of an active hit takes the nearest ray.
 
-    ``dist`` is scratch. Nodes owned by no ray get :data:`NO_OWNER`.
+    ``dist`` is scratch. Unowned nodes next to an owned one get :data:`NEIGHBOUR_OWNED`, the
+    others :data:`NO_OWNER`.
     """
     dist.fill_(1.0e30)
     owner.fill_(NO_OWNER)

@@ -9,9 +9,11 @@ The solver's iteration is one fused kernel, :func:`flow_step`, that evaluates
 
 explicitly and then applies the exact decay ``phi * exp(-w_P G dt)`` of the point term.
 The extended normal field ``V`` is stored sparsely: ``owner[i, j, k]`` is the index of the ray
-whose normal ``N_i`` replaces ``n`` at that node, or any value ``>= len(normals)`` where
+whose normal ``N_i`` replaces ``n`` at that node, or a value ``>= len(normals)`` where
 ``V = n`` (so ``n - V`` vanishes there and the normal term is exactly zero away from the
-constraints).
+constraints). Of those, :data:`NO_OWNER` also says that no neighbour of the node is owned,
+which lets the step skip the divergence there; :data:`NEIGHBOUR_OWNED` marks the unowned
+neighbours of owned nodes.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 __all__ = [
+    "NEIGHBOUR_OWNED",
+    "NO_OWNER",
     "central_gradient",
     "curvature_term",
     "flow_step",
@@ -36,6 +40,8 @@ __all__ = [
 ]
 
 TINY = 1.0e-12
+NO_OWNER = wp.constant(2**30)
+NEIGHBOUR_OWNED = wp.constant(2**30 - 1)
 
 
 @wp.func
@@ -50,10 +56,16 @@ def at(phi: wp.array3d[float], i: int, j: int, k: int) -> float:
 @wp.func
 def central_gradient(phi: wp.array3d[float], i: int, j: int, k: int, inv_2h: float) -> wp.vec3:
     """Second-order central-difference gradient at a node."""
+    ip = wp.min(i + 1, phi.shape[0] - 1)
+    im = wp.max(i - 1, 0)
+    jp = wp.min(j + 1, phi.shape[1] - 1)
+    jm = wp.max(j - 1, 0)
+    kp = wp.min(k + 1, phi.shape[2] - 1)
+    km = wp.max(k - 1, 0)
     return wp.vec3(
-        (at(phi, i + 1, j, k) - at(phi, i - 1, j, k)) * inv_2h,
-        (at(phi, i, j + 1, k) - at(phi, i, j - 1, k)) * inv_2h,
-        (at(phi, i, j, k + 1) - at(phi, i, j, k - 1)) * inv_2h,
+        (phi[ip, j, k] - phi[im, j, k]) * inv_2h,
+        (phi[i, jp, k] - phi[i, jm, k]) * inv_2h,
+        (phi[i, j, kp] - phi[i, j, km]) * inv_2h,
     )
 
 
@@ -69,41 +81,36 @@ def unit_normal(phi: wp.array3d[float], i: int, j: int, k: int, inv_2h: float) -
 
 @wp.func
 def curvature_term(phi: wp.array3d[float], i: int, j: int, k: int, h: float) -> float:
-    """``kappa |grad phi|`` with the usual central-difference mean curvature, ``|kappa| <= 1/h``."""
+    """``kappa |grad phi|`` with the usual central-difference mean curvature, ``|kappa| <= 1/h``.
+
+    The neighbours' indices are clamped once per axis (a clamp per read costs about 30% of
+    the term on the CPU); clamping per axis is what :func:`at` does.
+    """
     inv_2h = 0.5 / h
     inv_h2 = 1.0 / (h * h)
     inv_4h2 = 0.25 * inv_h2
+    ip = wp.min(i + 1, phi.shape[0] - 1)
+    im = wp.max(i - 1, 0)
+    jp = wp.min(j + 1, phi.shape[1] - 1)
+    jm = wp.max(j - 1, 0)
+    kp = wp.min(k + 1, phi.shape[2] - 1)
+    km = wp.max(k - 1, 0)
     c = phi[i, j, k]
-    xp = at(phi, i + 1, j, k)
-    xm = at(phi, i - 1, j, k)
-    yp = at(phi, i, j + 1, k)
-    ym = at(phi, i, j - 1, k)
-    zp = at(phi, i, j, k + 1)
-    zm = at(phi, i, j, k - 1)
+    xp = phi[ip, j, k]
+    xm = phi[im, j, k]
+    yp = phi[i, jp, k]
+    ym = phi[i, jm, k]
+    zp = phi[i, j, kp]
+    zm = phi[i, j, km]
     px = (xp - xm) * inv_2h
     py = (yp - ym) * inv_2h
     pz = (zp - zm) * inv_2h
     pxx = (xp - 2.0 * c + xm) * inv_h2
     pyy = (yp - 2.0 * c + ym) * inv_h2
     pzz = (zp - 2.0 * c + zm) * inv_h2
-    pxy = (
-        at(phi, i + 1, j + 1, k)
-        - at(phi, i + 1, j - 1, k)
-        - at(phi, i - 1, j + 1, k)
-        + at(phi, i - 1, j - 1, k)
-    ) * inv_4h2
-    pxz = (
-        at(phi, i + 1, j, k + 1)
-        - at(phi, i + 1, j, k - 1)
-        - at(phi, i - 1, j, k + 1)
-        + at(phi, i - 1, j, k - 1)
-    ) * inv_4h2
-    pyz = (
-        at(phi, i, j + 1, k + 1)
-        - at(phi, i, j + 1, k - 1)
-        - at(phi, i, j - 1, k + 1)
-        + at(phi, i, j - 1, k - 1)
-    ) * inv_4h2
+    pxy = (phi[ip, jp, k] - phi[ip, jm, k] - phi[im, jp, k] + phi[im, jm, k]) * inv_4h2
+    pxz = (phi[ip, j, kp] - phi[ip, j, km] - phi[im, j, kp] + phi[im, j, km]) * inv_4h2
+    pyz = (phi[i, jp, kp] - phi[i, jp, km] - phi[i, jm, kp] + phi[i, jm, km]) * inv_4h2
     g2 = px * px + py * py + pz * pz
     if g2 < TINY:
         return 0.0
@@ -234,7 +241,7 @@ def advance(
     rate = float(0.0)
     if alpha != 0.0:
         rate += alpha * curvature_term(phi, i, j, k, h)
-    if normal_weight != 0.0:
+    if normal_weight != 0.0 and owner[i, j, k] != NO_OWNER:  # else no neighbour is owned
         div = normal_divergence(phi, owner, normals, i, j, k, inv_2h)
         if div != 0.0:
             g = wp.length(central_gradient(phi, i, j, k, inv_2h))
