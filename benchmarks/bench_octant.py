@@ -9,7 +9,7 @@ the set-up, the iterations, marching cubes and writing the mesh all count:
   start and the end, as a run without ``--metrics`` reduces them; and ``--resolution``/
   ``--iterations``/``--device`` when they differ from the defaults);
 - ``api``: ``Reconstructor(scene, resolution=64, bulge=0.5)``, ``.run(300)``, ``.result()``
-  and ``mesh.export`` in a short script, which also reports its own phases.
+  and ``.write_mesh`` in a short script, which also reports its own phases.
 
 Cold: ``WARP_CACHE_PATH`` points at a new empty folder (Python's bytecode and the OS file cache
 stay warm). Warm: the next processes on that same folder. Rows give the median of the runs.
@@ -48,14 +48,14 @@ solver.run(cfg["iterations"])
 t3 = time.perf_counter()
 result = solver.result()
 t4 = time.perf_counter()
-result.mesh.export(cfg["output"])
+result.write_mesh(cfg["output"])
 t5 = time.perf_counter()
 last = result.history[-1]
 print("BENCH-JSON " + json.dumps({
     "import_s": t1 - t0, "setup_s": t2 - t1, "run_s": t3 - t2, "result_s": t4 - t3,
     "export_s": t5 - t4, "normal_error": last["normal_error"],
     "point_error": last["point_error"], "misses": last["misses"],
-    "faces": int(len(result.mesh.faces))}))
+    "faces": int(len(result.faces))}))
 """
 
 

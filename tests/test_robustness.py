@@ -48,13 +48,11 @@ def _interrupt_solver(monkeypatch):
 
 
 def _interrupt_mesh_export(monkeypatch):
-    import trimesh
-
-    def export(self, file_obj=None, file_type=None, **kwargs):
-        Path(file_obj).write_bytes(b"ply\nformat ascii 1.0\nelement vertex 99")  # half a mesh
+    def write_ply(path, vertices, faces):
+        Path(path).write_bytes(b"ply\nformat ascii 1.0\nelement vertex 99")  # half a mesh
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(trimesh.Trimesh, "export", export)
+    monkeypatch.setattr("warpspec.mesh.write_ply", write_ply)
 
 
 def _interrupt_level_set_save(monkeypatch):
@@ -98,13 +96,11 @@ def test_an_interrupted_run_keeps_the_previous_output(capsys, folder, monkeypatc
 
 
 def test_a_failed_write_is_one_line_and_leaves_nothing(capsys, folder, monkeypatch):
-    import trimesh
-
-    def export(self, file_obj=None, file_type=None, **kwargs):
-        Path(file_obj).write_bytes(b"ply\n")
+    def write_ply(path, vertices, faces):
+        Path(path).write_bytes(b"ply\n")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(trimesh.Trimesh, "export", export)
+    monkeypatch.setattr("warpspec.mesh.write_ply", write_ply)
     status = main(reconstruct_all(folder))
     err = capsys.readouterr().err
     assert status == 1

@@ -103,6 +103,36 @@ def test_mesh_of_a_sphere_faces_outward(device):
     assert np.allclose(np.linalg.norm(mesh.vertices, axis=1), 0.6, atol=0.01)
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["outside-positive", "inside-positive"])
+def test_triangulation_is_trimesh_processing_and_the_ply_reads_back(tmp_path, sign):
+    import trimesh
+    from skimage import measure
+
+    from warpspec.mesh import triangulate, write_ply
+
+    grid = ws.Grid.from_bounds(np.full(3, -1.0), np.array([1.0, 0.8, 0.9]), resolution=24)
+    x, y, z = grid.coordinates()
+    # box faces lie on nodes, where marching cubes repeats vertices (with phi > 0 outside)
+    phi = sign * (np.maximum(np.abs(x - 0.1), np.maximum(np.abs(y), np.abs(z))) - 0.5)
+    verts, faces = triangulate(phi, grid)
+    raw, raw_faces, _, _ = measure.marching_cubes(phi.astype(np.float32), 0.0,
+                                                  spacing=(grid.spacing,) * 3)
+    assert len(raw) > len(verts) if sign > 0 else len(raw) == len(verts)  # merged
+    ref = trimesh.Trimesh(raw.astype(np.float64) + grid.origin, raw_faces, process=True)
+    assert len(verts) == len(ref.vertices) and len(faces) == len(ref.faces)
+    key = [{tuple(np.round(v, 8)) for v in m} for m in (verts, ref.vertices)]
+    assert key[0] == key[1]
+    mesh = trimesh.Trimesh(verts, faces, process=False)
+    assert mesh.is_winding_consistent
+    # faces point toward phi > 0: outward for a positive outside, inward otherwise
+    assert np.sign(mesh.volume) == sign
+    assert abs(mesh.volume) == pytest.approx(ref.volume if sign > 0 else -ref.volume, rel=0)
+    write_ply(tmp_path / "m.ply", verts, faces)
+    back = trimesh.load(tmp_path / "m.ply", process=False)
+    np.testing.assert_allclose(back.vertices, verts, atol=1e-6)
+    np.testing.assert_array_equal(back.faces, faces)
+
+
 def test_reinitialisation_keeps_points_on_the_surface(octant):
     solver = ws.Reconstructor(octant, resolution=32, device="cpu")
     h = solver.grid.spacing

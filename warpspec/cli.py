@@ -129,6 +129,13 @@ def write_metrics(path: Path, history: list[dict]) -> None:
 
 
 def _mesh_writer(mesh, suffix: str) -> Callable[[Path], None]:
+    """Write ``mesh`` (a Trimesh, or anything with vertices and faces for PLY) as ``suffix``."""
+    if suffix == ".ply":  # written directly: a run that writes PLY never imports trimesh
+        from .mesh import write_ply
+
+        return lambda tmp: write_ply(tmp, mesh.vertices, mesh.faces)
+    if not hasattr(mesh, "export"):
+        mesh = mesh.mesh  # a Result: its Trimesh
     return lambda tmp: mesh.export(tmp, file_type=suffix[1:])
 
 
@@ -304,12 +311,12 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     result = solver.result()
-    mesh = result.mesh
+    mesh = result  # its vertices and faces; result.mesh (trimesh) only where one is needed
     if args.crop == "hull":
         from .mesh import crop_to_hull
 
         try:
-            mesh = crop_to_hull(mesh, result.constraint_anchors(scene))
+            mesh = crop_to_hull(result.mesh, result.constraint_anchors(scene))
         except (SceneError, ReconstructionError) as exc:
             raise ReconstructionError(f"--crop hull: {exc}") from None
 
@@ -325,7 +332,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
             normals = _constraint_normals(scene, result.hits)
             outputs.stage(render, lambda tmp: render_mesh(
-                mesh, tmp, points=scene.points, hits=result.hits, normals=normals,
+                result.mesh if mesh is result else mesh, tmp, points=scene.points,
+                hits=result.hits, normals=normals,
                 cameras=scene.camera_centres(),
                 title=f"{Path(args.scene).name}: {len(mesh.faces)} faces"
                       f"{' (cropped to the hull)' if args.crop else ''}"))
@@ -427,7 +435,20 @@ def _points_choice(text: str) -> str | list[int]:
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line: ``prog: error: message (see --help)``."""
+    """An argument parser whose errors are one line: ``prog: error: message (see --help)``.
+
+    ``epilog_factory`` makes the epilog only when the help is shown (the list of built-in
+    scenes imports trimesh and SciPy, which a reconstruction does not otherwise need).
+    """
+
+    def __init__(self, *args, epilog_factory: Callable[[], str] | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.epilog_factory = epilog_factory
+
+    def format_help(self) -> str:
+        if self.epilog_factory is not None:
+            self.epilog, self.epilog_factory = self.epilog_factory(), None
+        return super().format_help()
 
     def error(self, message: str):
         text = " ".join(message.split())

@@ -281,7 +281,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         description="Write a built-in synthetic scene (scene format version 1) and, optionally, "
                     "its ground truth. The geometry of each scene is fixed; --seed drives only "
                     "the pixel noise and the outliers.",
-        epilog="scenes:\n" + _scene_list(),
+        epilog_factory=lambda: "scenes:\n" + _scene_list(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     synth.add_argument("name", metavar="NAME", help="built-in scene (listed below)")

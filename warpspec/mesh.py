@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -9,10 +10,10 @@ import numpy as np
 from .errors import ReconstructionError
 from .grid import Grid
 
-if TYPE_CHECKING:  # trimesh and scikit-image load in ~1 s: only when a mesh is made
+if TYPE_CHECKING:  # trimesh (and SciPy) load in ~0.6 s: only when a Trimesh is asked for
     import trimesh
 
-__all__ = ["crop_to_hull", "extract_mesh", "sample_trilinear"]
+__all__ = ["crop_to_hull", "extract_mesh", "sample_trilinear", "triangulate", "write_ply"]
 
 
 def sample_trilinear(field: np.ndarray, grid: Grid, points: np.ndarray) -> np.ndarray:
@@ -31,17 +32,18 @@ def sample_trilinear(field: np.ndarray, grid: Grid, points: np.ndarray) -> np.nd
     return out
 
 
-def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:
-    """Triangulate the zero set of ``phi`` with faces facing ``phi > 0``.
+def triangulate(phi: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate the zero set of ``phi``: vertices (world, float64) and faces facing ``phi > 0``.
 
-    scikit-image's winding depends on its ``gradient_direction``; rather than trust it, the
-    winding is checked against ``phi`` itself: stepping along the face normals must increase
-    ``phi`` on most faces, else every face is flipped. Normals come from the mesh.
+    Marching cubes (scikit-image); vertices at the same position (to 1e-8, as trimesh merges
+    them) are merged. scikit-image's winding depends on its ``gradient_direction``; rather
+    than trust it, the winding is checked against ``phi`` itself: stepping along the face
+    normals must increase ``phi`` on most of the area, else every face is flipped. NumPy and
+    scikit-image only: importing trimesh costs more than the whole triangulation.
 
     Raises:
         ReconstructionError: If ``phi`` has no zero crossing inside the grid.
     """
-    import trimesh
     from skimage import measure
 
     phi = np.asarray(phi, dtype=np.float32)
@@ -53,15 +55,63 @@ def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:
     h = grid.spacing
     verts, faces, _, _ = measure.marching_cubes(phi, level=0.0, spacing=(h, h, h))
     verts = verts.astype(np.float64) + grid.origin
-    mesh = trimesh.Trimesh(vertices=verts, faces=faces, process=True)
-    if len(mesh.faces):
-        centres = mesh.triangles_center
-        step = 0.25 * h * mesh.face_normals
+    key = np.round(verts * 1e8).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # keep the vertices in the order they first appear
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    verts = verts[first[order]]
+    faces = rank[inverse.reshape(-1)][faces].astype(np.int64)
+    if len(faces):
+        tri = verts[faces]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        normal = cross / np.maximum(2.0 * area, 1e-300)[:, None]
+        centres = tri.mean(axis=1)
+        step = 0.25 * h * normal
         rise = sample_trilinear(phi, grid, centres + step) - sample_trilinear(phi, grid,
-                                                                                centres - step)
-        if np.sum(np.sign(rise) * mesh.area_faces) < 0:
-            mesh.invert()
-    return mesh
+                                                                              centres - step)
+        if np.sum(np.sign(rise) * area) < 0:
+            faces = faces[:, ::-1].copy()
+    return verts, faces
+
+
+def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:
+    """The zero set of ``phi`` as a ``trimesh.Trimesh``, faces facing ``phi > 0``.
+
+    See :func:`triangulate`.
+
+    Raises:
+        ReconstructionError: If ``phi`` has no zero crossing inside the grid.
+    """
+    import trimesh
+
+    verts, faces = triangulate(phi, grid)
+    return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
+
+
+def write_ply(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Write a triangle mesh as binary little-endian PLY (float vertices, int indices).
+
+    The layout is the one trimesh writes; the command line uses it for ``.ply`` so that a run
+    need not import trimesh (and SciPy) at all.
+    """
+    vertices = np.ascontiguousarray(vertices, dtype="<f4")
+    faces = np.asarray(faces)
+    records = np.empty(len(faces), dtype=[("count", "u1"), ("index", "<i4", (3,))])
+    records["count"] = 3
+    records["index"] = faces
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {len(vertices)}\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        f"element face {len(faces)}\n"
+        "property list uchar int vertex_indices\nend_header\n"
+    )
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(vertices.tobytes())
+        f.write(records.tobytes())
 
 
 def crop_to_hull(mesh: trimesh.Trimesh, anchors: np.ndarray) -> trimesh.Trimesh:

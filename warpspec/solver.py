@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -37,8 +38,11 @@ from .kernels.differences import (
 )
 from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_measures
 from .kernels.redistance import Redistancer
-from .mesh import extract_mesh
+from .mesh import triangulate, write_ply
 from .scene import Scene
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["Reconstructor", "Result", "reconstruct"]
 
@@ -64,8 +68,9 @@ class Result:
     """What a reconstruction returns.
 
     Attributes:
-        mesh: The zero set as a ``trimesh.Trimesh`` in world coordinates, faces outward
-            (toward ``phi > 0`` and the cameras).
+        vertices: Vertices of the zero set's triangulation, world coordinates, ``(n, 3)``.
+        faces: Its triangles, ``(m, 3)`` vertex indices, wound outward (toward ``phi > 0``
+            and the cameras).
         phi: The level set on the grid, ``float32``, indexed ``[i, j, k]``.
         grid: The grid ``phi`` lives on.
         history: Per-iteration measures, one dict per recorded iteration (keys:
@@ -76,11 +81,34 @@ class Result:
         hits: Ray intersections of the last iteration, ``(M, 3)``; NaN for missed rays.
     """
 
-    mesh: object
+    vertices: np.ndarray
+    faces: np.ndarray
     phi: np.ndarray
     grid: Grid
     history: list[dict] = field(default_factory=list)
     hits: np.ndarray | None = None
+    _mesh: object = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def mesh(self) -> trimesh.Trimesh:
+        """The triangulation as a ``trimesh.Trimesh`` (made, and trimesh imported, on first use)."""
+        if self._mesh is None:
+            import trimesh
+
+            self._mesh = trimesh.Trimesh(vertices=self.vertices, faces=self.faces,
+                                         process=False)
+        return self._mesh
+
+    def write_mesh(self, path: str | os.PathLike) -> None:
+        """Write the triangulation in the format that ``path``'s extension names.
+
+        ``.ply`` is written directly (binary, as trimesh writes it); other formats go through
+        ``trimesh.Trimesh.export``.
+        """
+        if Path(path).suffix.lower() == ".ply":
+            write_ply(path, self.vertices, self.faces)
+        else:
+            self.mesh.export(path)
 
     def constraint_anchors(self, scene: Scene) -> np.ndarray:
         """The ray intersections that hit and the point constraints, stacked ``(n, 3)``."""
@@ -667,8 +695,9 @@ class Reconstructor:
         self._current_hits()
         hits = self._hits.numpy().astype(np.float64)
         hits[self._active.numpy() == 0] = np.nan
-        mesh = extract_mesh(phi, self.grid)
-        return Result(mesh=mesh, phi=phi, grid=self.grid, history=list(self.history), hits=hits)
+        vertices, faces = triangulate(phi, self.grid)
+        return Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
+                      history=list(self.history), hits=hits)
 
 
 # Device bytes per voxel: phi, its ping-pong twin, the last good phi, G, owner and the narrow
