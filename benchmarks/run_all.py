@@ -228,7 +228,7 @@ def targets(runs: dict[str, dict], cuda: bool) -> list[tuple[str, str, str]]:
 
 
 def render(runs: dict[str, dict], info: dict, command: str, args: argparse.Namespace,
-           cuda: bool, started: str, load: tuple[tuple, tuple]) -> str:
+           cuda: bool, started: str, load: tuple[tuple, tuple], steal: str | None = None) -> str:
     """The text of BENCHMARKS.md."""
     out = ["# warpspec benchmarks", ""]
     if args.smoke:
@@ -246,7 +246,10 @@ def render(runs: dict[str, dict], info: dict, command: str, args: argparse.Names
     ]
     out += [f"| {k} | {v} |" for k, v in info.items()]
     out += [f"| load average (1, 5, 15 min) | {_load(load[0])} at the start, {_load(load[1])} "
-            "at the end |", ""]
+            "at the end |"]
+    if steal is not None:
+        out += [f"| stolen by the hypervisor during the run | {steal} |"]
+    out += [""]
     rows = targets(runs, cuda)
     if rows:
         out += ["## Issue 4 targets", "", "| target | measured | |", "|---|---|---|"]
@@ -274,6 +277,25 @@ def _load(values: tuple) -> str:
     return ", ".join(f"{v:.2f}" for v in values)
 
 
+def _cpu_ticks() -> list[int] | None:
+    """The machine's CPU time counters from /proc/stat (user ... steal), or None."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+    except OSError:
+        return None
+    return [int(v) for v in fields[1:9]] if fields and fields[0] == "cpu" else None
+
+
+def _steal(start: list[int] | None, end: list[int] | None) -> str | None:
+    """Share of CPU time the hypervisor took from this virtual machine between two readings."""
+    if start is None or end is None:
+        return None
+    delta = [b - a for a, b in zip(start, end, strict=True)]
+    total = sum(delta)
+    return f"{100.0 * delta[7] / total:.1f}% of all CPU time" if total > 0 else None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", help="Warp device (cpu, cuda, cuda:0)")
@@ -295,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
 
     started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     load_start = os.getloadavg()
+    ticks_start = _cpu_ticks()
     command = shlex.join(["python", "benchmarks/run_all.py", *(argv if argv is not None
                                                                 else sys.argv[1:])])
     info = machine_info(args.device)
@@ -323,7 +346,8 @@ def main(argv: list[str] | None = None) -> int:
                 failed.append(name)
                 print(run["stderr"], file=sys.stderr, flush=True)
             print(f"[run_all] {name}: {run['seconds']:.0f} s", flush=True)
-    text = render(runs, info, command, args, cuda, started, (load_start, os.getloadavg()))
+    text = render(runs, info, command, args, cuda, started, (load_start, os.getloadavg()),
+                  _steal(ticks_start, _cpu_ticks()))
     output = Path(args.output)
     output.parent.mkdir(parents=True, exist_ok=True)
     output.write_text(text)
