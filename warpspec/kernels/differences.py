@@ -299,6 +299,16 @@ def band_node(code: int, shape: wp.vec3i) -> wp.vec3i:
     return unflatten(code, shape)
 
 
+@wp.func
+def band_slot(band: wp.array[int], count: wp.array[int], s: int, reverse: int,
+              shape: wp.vec3i) -> wp.vec3i:
+    """Node of slot ``s`` of a band list (from its end when ``reverse``), or -1s past the list."""
+    n = count[0]
+    if s >= n:
+        return wp.vec3i(-1, -1, -1)
+    return band_node(band[wp.where(reverse == 1, n - 1 - s, s)], shape)
+
+
 @wp.kernel
 def flow_step_band(
     phi: wp.array3d[float],
@@ -315,10 +325,9 @@ def flow_step_band(
     out: wp.array3d[float],
 ):
     """The flow step on the nodes of a narrow band only (``band[:count[0]]``, see build_band)."""
-    s = wp.tid()
-    if s >= count[0]:
+    n = band_slot(band, count, wp.tid(), 0, wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    if n[0] < 0:
         return
-    n = band_node(band[s], wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
     out[n[0], n[1], n[2]] = advance(phi, owner, normals, gauss, n[0], n[1], n[2], h, dt,
                                     normal_weight, alpha, point_weight)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .differences import band_node, central_gradient, unit_normal
+from .differences import band_slot, central_gradient, unit_normal
 
 wp.set_module_options({"enable_backward": False})
 
@@ -264,10 +264,9 @@ def measure_band(
     sums: wp.array[wp.float64],
 ):
     """Grid integrals over the nodes of a narrow band (the only ones that change)."""
-    s = wp.tid()
-    if s >= count[0]:
+    n = band_slot(band, count, wp.tid(), 0, wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    if n[0] < 0:
         return
-    n = band_node(band[s], wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
     measure_node(phi, owner, normals, n[0], n[1], n[2], h, sums)
 
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..errors import SceneError
-from .differences import band_node
+from .differences import band_slot
 
 wp.set_module_options({"enable_backward": False})
 
@@ -392,16 +392,6 @@ def apply_sign_kernel(
             phi[i, j, k] = v
 
 
-@wp.func
-def _band_node(band: wp.array[int], count: wp.array[int], s: int, reverse: int,
-               shape: wp.vec3i) -> wp.vec3i:
-    """Node of slot ``s`` of a band list (counted from its end when ``reverse``), or -1s."""
-    n = count[0]
-    if s >= n:
-        return wp.vec3i(-1, -1, -1)
-    return band_node(band[wp.where(reverse == 1, n - 1 - s, s)], shape)
-
-
 @wp.kernel
 def band_init_kernel(
     phi: wp.array3d[float],
@@ -415,7 +405,7 @@ def band_init_kernel(
 ):
     """Freeze the band nodes next to a sign change; start the others at ``cap`` (index units)."""
     s = wp.tid()
-    n = _band_node(band, count, s, 0, wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    n = band_slot(band, count, s, 0, wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
     if n[0] < 0:
         return
     i = n[0]
@@ -450,7 +440,7 @@ def band_sweep_kernel(
     enough passes reach it in any order. Nodes off the band read as ``BIG``: never upwind.
     """
     s = wp.tid()
-    n = _band_node(band, count, s, reverse, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
+    n = band_slot(band, count, s, reverse, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
     if n[0] < 0:
         return
     f = int(flags[n[0], n[1], n[2]])
@@ -474,7 +464,7 @@ def band_sign_kernel(
     s = wp.tid()
     if frozen[0] == 0:
         return
-    n = _band_node(band, count, s, 0, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
+    n = band_slot(band, count, s, 0, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
     if n[0] < 0:
         return
     v = d[n[0], n[1], n[2]] * h
