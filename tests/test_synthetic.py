@@ -63,10 +63,10 @@ def light_vector(light, x, c):
 
 
 def check_reflection_law(scene_dict, truth_points, truth_normals, tol=1e-9):
-    light = scene_dict["light"]
     for spec, x, n in zip(scene_dict["specularities"], truth_points, truth_normals, strict=True):
-        P = scene_dict["cameras"][spec["camera"]]["P"]
-        c, r = design_ray(P, spec["pixel"])
+        camera = scene_dict["cameras"][spec["camera"]]
+        light = camera.get("light", scene_dict.get("light"))
+        c, r = design_ray(camera["P"], spec["pixel"])
         # The ray passes through the true point, in front of the camera.
         depth = np.dot(x - c, r)
         assert depth > 0
@@ -139,7 +139,8 @@ def test_domain_is_cut_by_the_surface_and_holds_no_camera(scenes, name):
 
 def test_builtin_scene_counts(scenes):
     counts = {
-        name: (len(s.truth_points), len(s.cameras), len(s.points), s.scene_dict["light"]["type"])
+        name: (len(s.truth_points), len(s.cameras), len(s.points),
+               s.scene_dict.get("light", {}).get("type"))
         for name, s in scenes.items()
     }
     assert counts["octant"] == (24, 24, 3, "directional")

@@ -25,8 +25,10 @@ Built-in scenes (:func:`make_scene`) reproduce the paper's experiments with look
 from __future__ import annotations
 
 import copy
+import inspect
 import json
 import math
+import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -68,6 +70,7 @@ __all__ = [
     "corrupt_pixels",
     "ellipsoid_cap",
     "find_highlight",
+    "find_highlights",
     "look_at",
     "make_scene",
     "octant",
@@ -780,6 +783,479 @@ class MeshSurface(Surface):
         return np.asarray(pts, dtype=np.float64)
 
 
+def _march(
+    f: Callable[[np.ndarray], np.ndarray],
+    origins: np.ndarray,
+    directions: np.ndarray,
+    t0: np.ndarray,
+    t1: np.ndarray,
+    *,
+    step: float,
+) -> np.ndarray:
+    """First sign change of ``f`` along rays between ``t0`` and ``t1``, refined by bisection.
+
+    ``f`` maps points ``(N, 3)`` to values ``(N,)``. The rays are sampled every ``step`` (at
+    most 4096 samples); a crossing thinner than a step (a grazing ray) can be missed.
+
+    Returns:
+        The ray parameters of the first crossings ``(N,)``, ``inf`` where there is none.
+    """
+    o, d = _points(origins), _points(directions)
+    out = np.full(len(o), np.inf)
+    todo = np.flatnonzero(np.isfinite(t0) & np.isfinite(t1) & (t1 > t0))
+    if len(todo) == 0:
+        return out
+    span = float(np.max(t1[todo] - t0[todo]))
+    k = int(min(max(math.ceil(span / step), 2), 4096)) + 1
+    s = np.linspace(0.0, 1.0, k)
+    ts = t0[todo, None] + s[None, :] * (t1[todo] - t0[todo])[:, None]
+    pts = o[todo, None, :] + ts[..., None] * d[todo, None, :]
+    val = f(pts.reshape(-1, 3)).reshape(len(todo), k)
+    change = (np.sign(val[:, :-1]) != np.sign(val[:, 1:])) | (val[:, :-1] == 0)
+    has = change.any(axis=1)
+    first = np.argmax(change, axis=1)
+    rows = np.flatnonzero(has)
+    if len(rows) == 0:
+        return out
+    lo = ts[rows, first[rows]]
+    hi = ts[rows, first[rows] + 1]
+    flo = val[rows, first[rows]]
+    idx = todo[rows]
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        fm = f(o[idx] + mid[:, None] * d[idx])
+        same = np.sign(fm) == np.sign(flo)
+        lo = np.where(same, mid, lo)
+        flo = np.where(same, fm, flo)
+        hi = np.where(same, hi, mid)
+    out[idx] = np.where(flo == 0, lo, 0.5 * (lo + hi))
+    return out
+
+
+def _box_interval(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Ray parameters ``(t0, t1)`` where rays are inside the box ``[lo, hi]`` (empty: t0 > t1)."""
+    o, d = _points(origins), _points(directions)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    tmin = np.where(np.isnan(ta), -np.inf, np.minimum(ta, tb))
+    tmax = np.where(np.isnan(ta), np.inf, np.maximum(ta, tb))
+    # Rays parallel to a slab: inside for all t or never.
+    par = d == 0
+    outside = par & ((o < lo) | (o > hi))
+    tmin = np.where(par, -np.inf, tmin)
+    tmax = np.where(par, np.inf, tmax)
+    t0 = tmin.max(axis=1)
+    t1 = np.where(outside.any(axis=1), -np.inf, tmax.min(axis=1))
+    return t0, t1
+
+
+class Torus(Surface):
+    """A ring torus: the points at distance ``minor`` from a circle of radius ``major``.
+
+    Args:
+        centre: Centre ``(3,)``.
+        axis: Axis of symmetry ``(3,)`` (the hole runs along it).
+        major: Radius of the tube's centre circle (> minor).
+        minor: Radius of the tube (> 0).
+    """
+
+    closed = True
+
+    def __init__(self, centre: Sequence[float], axis: Sequence[float], major: float,
+                 minor: float) -> None:
+        self.centre = _vec3(centre, "centre")
+        self.axis = _unit3(axis, "axis")
+        if not (np.isfinite(minor) and np.isfinite(major) and 0 < minor < major):
+            raise SceneError(f"minor, major: need 0 < minor < major, got {minor!r}, {major!r}")
+        self.major, self.minor = float(major), float(minor)
+        self.e1, self.e2 = _tangent_basis(self.axis)
+
+    def _local(self, x: np.ndarray) -> np.ndarray:
+        y = _points(x) - self.centre
+        return np.column_stack([y @ self.e1, y @ self.e2, y @ self.axis])
+
+    def at(self, u: Any, v: Any) -> np.ndarray:
+        """Points at angle ``u`` around the axis and ``v`` around the tube, shape ``(..., 3)``."""
+        u = np.asarray(u, dtype=np.float64)[..., None]
+        v = np.asarray(v, dtype=np.float64)[..., None]
+        ring = self.major + self.minor * np.cos(v)
+        return (self.centre + ring * (np.cos(u) * self.e1 + np.sin(u) * self.e2)
+                + self.minor * np.sin(v) * self.axis)
+
+    def _angles(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = self._local(x)
+        u = np.arctan2(q[:, 1], q[:, 0])
+        v = np.arctan2(q[:, 2], np.hypot(q[:, 0], q[:, 1]) - self.major)
+        return u, v
+
+    def implicit(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        q = self._local(x)
+        return np.hypot(np.hypot(q[:, 0], q[:, 1]) - self.major, q[:, 2]) - self.minor
+
+    def signed_distance(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        return self.implicit(x)
+
+    def normal(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        u, v = self._angles(x)
+        radial = np.cos(u)[:, None] * self.e1 + np.sin(u)[:, None] * self.e2
+        return np.cos(v)[:, None] * radial + np.sin(v)[:, None] * self.axis
+
+    def closest_point(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        u, v = self._angles(x)
+        return self.at(u, v)
+
+    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Chart by the two angles around ``x0``: smooth and exactly on the torus."""
+        u0, v0 = (float(a[0]) for a in self._angles(np.asarray(x0).reshape(1, 3)))
+
+        def point(uv: np.ndarray) -> np.ndarray:
+            return self.at(u0 + uv[0], v0 + uv[1])
+
+        return point
+
+    def intersect(
+        self, origins: np.ndarray, directions: np.ndarray, *, t_min: float = 1e-9
+    ) -> np.ndarray:
+        """First hits: real roots of the quartic, polished by Newton steps on the distance."""
+        o = self._local(origins)
+        d = self._local(_points(directions) + self.centre)
+        R2, r2 = self.major**2, self.minor**2
+        A = _dot(d, d)
+        B = 2 * _dot(o, d)
+        K = _dot(o, o) + R2 - r2
+        coeffs = np.column_stack([
+            A * A, 2 * A * B, B * B + 2 * A * K - 4 * R2 * (d[:, 0] ** 2 + d[:, 1] ** 2),
+            2 * B * K - 8 * R2 * (o[:, 0] * d[:, 0] + o[:, 1] * d[:, 1]),
+            K * K - 4 * R2 * (o[:, 0] ** 2 + o[:, 1] ** 2),
+        ])
+        out = np.full(len(o), np.inf)
+        for i in range(len(o)):
+            roots = np.roots(coeffs[i])
+            scale = max(1.0, float(np.abs(roots).max(initial=0.0)))
+            real = np.sort(roots[np.abs(roots.imag) <= 1e-6 * scale].real)
+            for t in real:
+                for _ in range(8):  # Newton on the exact distance along the ray
+                    p = o[i] + t * d[i]
+                    rho = math.hypot(p[0], p[1])
+                    dist = math.hypot(rho - self.major, p[2])
+                    if dist == 0 or rho == 0:
+                        break
+                    g = np.array([p[0] / rho * (rho - self.major), p[1] / rho * (rho - self.major),
+                                  p[2]]) / dist
+                    slope = float(g @ d[i])
+                    if abs(slope) < 1e-9 * math.sqrt(A[i]):
+                        break
+                    t -= (dist - self.minor) / slope
+                if t > t_min:
+                    out[i] = t
+                    break
+        return out
+
+    def mesh(self, *, sections: int = 192, tube: int = 64) -> trimesh.Trimesh:
+        """Watertight grid mesh: ``sections`` around the axis, ``tube`` around the tube."""
+        u = np.linspace(0, 2 * math.pi, sections, endpoint=False)
+        v = np.linspace(0, 2 * math.pi, tube, endpoint=False)
+        grid = self.at(u[:, None], v[None, :])
+        idx = np.arange(sections * tube).reshape(sections, tube)
+        nu, nv = np.roll(idx, -1, axis=0), np.roll(idx, -1, axis=1)
+        nuv = np.roll(nu, -1, axis=1)
+        faces = np.concatenate([np.stack([idx, nu, nuv], -1).reshape(-1, 3),
+                                np.stack([idx, nuv, nv], -1).reshape(-1, 3)])
+        m = trimesh.Trimesh(vertices=grid.reshape(-1, 3), faces=faces, process=False)
+        return _orient(m, self)
+
+
+class Revolution(Surface):
+    """A bottle-like surface of revolution: radius ``neck + (body - neck) (1 - tanh s) / 2``.
+
+    With ``s = (height - shoulder) / width``, the height measured along ``axis`` from ``base``:
+    a body of radius ``body`` below the shoulder, a neck of radius ``neck`` above it, joined
+    smoothly. The surface is unbounded along the axis; its mesh spans ``extent``.
+
+    Args:
+        base: A point on the axis ``(3,)`` (height 0).
+        axis: Axis direction ``(3,)`` (toward the neck).
+        body: Radius of the body (> neck).
+        neck: Radius of the neck (> 0).
+        shoulder: Height of the middle of the shoulder.
+        width: Length scale of the shoulder (> 0).
+        extent: Heights ``(lo, hi)`` the mesh spans.
+    """
+
+    closed = True
+
+    def __init__(self, base: Sequence[float], axis: Sequence[float], *, body: float,
+                 neck: float, shoulder: float, width: float,
+                 extent: tuple[float, float] = (-1.0, 1.0)) -> None:
+        self.base = _vec3(base, "base")
+        self.axis = _unit3(axis, "axis")
+        if not (0 < neck < body and width > 0):
+            raise SceneError(f"body, neck, width: need 0 < neck < body and width > 0, got "
+                             f"{body!r}, {neck!r}, {width!r}")
+        self.body, self.neck = float(body), float(neck)
+        self.shoulder, self.width = float(shoulder), float(width)
+        self.extent = (float(extent[0]), float(extent[1]))
+        self.e1, self.e2 = _tangent_basis(self.axis)
+
+    def radius(self, h: np.ndarray) -> np.ndarray:
+        """Radius at heights ``h``."""
+        s = (np.asarray(h, dtype=np.float64) - self.shoulder) / self.width
+        return self.neck + (self.body - self.neck) * 0.5 * (1 - np.tanh(s))
+
+    def _derivatives(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        th = np.tanh((h - self.shoulder) / self.width)
+        sech2 = 1 - th * th
+        k = 0.5 * (self.body - self.neck) / self.width
+        return -k * sech2, 2 * k / self.width * sech2 * th
+
+    def _split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        y = _points(x) - self.base
+        h = y @ self.axis
+        radial = y - h[:, None] * self.axis
+        rho = np.linalg.norm(radial, axis=1)
+        e = np.where(rho[:, None] > 0, radial / np.where(rho > 0, rho, 1.0)[:, None], self.e1)
+        return h, rho, e
+
+    def at(self, angle: Any, height: Any) -> np.ndarray:
+        """Surface points at angles and heights, broadcast, shape ``(..., 3)``."""
+        a = np.asarray(angle, dtype=np.float64)[..., None]
+        h = np.asarray(height, dtype=np.float64)[..., None]
+        return (self.base + h * self.axis
+                + self.radius(h) * (np.cos(a) * self.e1 + np.sin(a) * self.e2))
+
+    def implicit(self, x: np.ndarray) -> np.ndarray:
+        """``rho - radius(h)``: the sign of the distance, not the distance itself."""
+        h, rho, _ = self._split(x)
+        return rho - self.radius(h)
+
+    def normal(self, x: np.ndarray) -> np.ndarray:
+        """Unit gradient of :meth:`implicit`: the surface normal at surface points."""
+        h, _, e = self._split(x)
+        d1, _ = self._derivatives(h)
+        return _normalize(e - d1[:, None] * self.axis)
+
+    def closest_point(self, x: np.ndarray) -> np.ndarray:
+        """Closest points: the nearest point of the profile in the meridian half-plane.
+
+        A dense scan over the heights picks the start, Newton iterations finish it.
+        """
+        h0, rho, e = self._split(x)
+        offs = np.linspace(-2.0, 2.0, 161) * (self.body + self.width)
+        hs = h0[:, None] + offs[None, :]
+        g = (rho[:, None] - self.radius(hs)) ** 2 + (hs - h0[:, None]) ** 2
+        h = hs[np.arange(len(hs)), np.argmin(g, axis=1)]
+        for _ in range(60):
+            r = self.radius(h)
+            d1, d2 = self._derivatives(h)
+            grad = -(rho - r) * d1 + (h - h0)
+            hess = d1 * d1 - (rho - r) * d2 + 1.0
+            step = grad / np.where(hess > 0.1, hess, 0.1)
+            h = h - step
+            if np.max(np.abs(step)) < 1e-15:
+                break
+        return self.base + h[:, None] * self.axis + self.radius(h)[:, None] * e
+
+    def signed_distance(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        x = _points(x)
+        d = np.linalg.norm(x - self.closest_point(x), axis=1)
+        return np.where(self.implicit(x) < 0, -d, d)
+
+    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Chart by angle and height around ``x0``: smooth and exactly on the surface."""
+        h0, _, e = self._split(np.asarray(x0).reshape(1, 3))
+        a0 = math.atan2(float(e[0] @ self.e2), float(e[0] @ self.e1))
+
+        def point(uv: np.ndarray) -> np.ndarray:
+            return self.at(a0 + uv[0], h0[0] + uv[1] * self.body)
+
+        return point
+
+    def intersect(  # noqa: D102
+        self, origins: np.ndarray, directions: np.ndarray, *, t_min: float = 1e-9
+    ) -> np.ndarray:
+        o, d = _points(origins), _points(directions)
+        # Only the inside of the cylinder of radius ``body`` can hold a crossing.
+        hull = Cylinder(self.base, self.axis, self.body * (1 + 1e-6))
+        oc, _ = hull._radial(o)
+        dc = d - (d @ self.axis)[:, None] * self.axis
+        a, b, c = _dot(dc, dc), 2 * _dot(dc, oc), _dot(oc, oc) - hull.radius**2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            disc = np.sqrt(np.where(b * b - 4 * a * c >= 0, b * b - 4 * a * c, np.nan))
+            t0 = np.where(a > 0, (-b - disc) / (2 * a), -np.inf)
+            t1 = np.where(a > 0, (-b + disc) / (2 * a), np.inf)
+        t0 = np.maximum(np.nan_to_num(t0, nan=np.inf), t_min)
+        t1 = np.nan_to_num(t1, nan=-np.inf)
+        norm = np.linalg.norm(d, axis=1).max(initial=1.0)
+        return _march(self.implicit, o, d, t0, t1, step=0.01 * self.neck / norm)
+
+    def mesh(self, *, sections: int = 128, extent: tuple[float, float] | None = None
+             ) -> trimesh.Trimesh:
+        """Open tube over ``extent``: ``sections`` around, rings about as fine along the axis."""
+        lo, hi = extent or self.extent
+        step = math.pi * (self.body + self.neck) / sections
+        rings = min(max(int(math.ceil((hi - lo) / step)), 1), 4 * sections)
+        ang = np.linspace(0, 2 * math.pi, sections, endpoint=False)
+        hgt = np.linspace(lo, hi, rings + 1)
+        grid = self.at(ang[:, None], hgt[None, :])
+        idx = np.arange(sections * (rings + 1)).reshape(sections, rings + 1)
+        nxt = np.roll(idx, -1, axis=0)
+        a, b = idx[:, :-1].ravel(), nxt[:, :-1].ravel()
+        c, d = nxt[:, 1:].ravel(), idx[:, 1:].ravel()
+        faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+        m = trimesh.Trimesh(vertices=grid.reshape(-1, 3), faces=faces, process=False)
+        return _orient(m, self)
+
+
+class FreeformHeightField(Surface):
+    """An open surface ``z = z0 + waves + bumps - dome``, facing ``+z``.
+
+    ``waves`` are rows ``(amplitude, kx, ky, phase)`` adding ``a sin(kx x + ky y + phase)``;
+    ``bumps`` are rows ``(amplitude, cx, cy, sigma)`` adding
+    ``a exp(-((x - cx)^2 + (y - cy)^2) / (2 sigma^2))``; ``dome = (dx, dy)`` subtracts
+    ``dx x^2 + dy y^2``. ``region`` bounds the mesh and the samples; :meth:`intersect` looks for
+    hits over the region grown by half its size on each side.
+
+    Args:
+        z0: Base height.
+        waves: Sine terms ``(K, 4)``.
+        bumps: Gaussian terms ``(B, 4)``.
+        dome: Quadratic coefficients ``(dx, dy)``.
+        region: ``(xmin, xmax, ymin, ymax)``.
+    """
+
+    closed = False
+
+    def __init__(self, *, z0: float = 0.0, waves: Any = (), bumps: Any = (),
+                 dome: Sequence[float] = (0.0, 0.0), region: Sequence[float]) -> None:
+        self.z0 = float(z0)
+        self.waves = np.asarray(waves, dtype=np.float64).reshape(-1, 4)
+        self.bumps = np.asarray(bumps, dtype=np.float64).reshape(-1, 4)
+        if np.any(self.bumps[:, 3] <= 0):
+            raise SceneError("bumps: every sigma must be positive")
+        self.dome = np.asarray(dome, dtype=np.float64).reshape(2)
+        self.region = tuple(float(v) for v in region)
+        if len(self.region) != 4 or not (self.region[0] < self.region[1]
+                                         and self.region[2] < self.region[3]):
+            raise SceneError(f"region: expected (xmin, xmax, ymin, ymax), got {region!r}")
+
+    def _terms(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Height ``(N,)``, gradient ``(N, 2)`` and Hessian ``(N, 2, 2)``."""
+        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        x, y = p[:, 0], p[:, 1]
+        h = self.z0 - self.dome[0] * x * x - self.dome[1] * y * y
+        g = np.column_stack([-2 * self.dome[0] * x, -2 * self.dome[1] * y])
+        H = np.zeros((len(p), 2, 2))
+        H[:, 0, 0] = -2 * self.dome[0]
+        H[:, 1, 1] = -2 * self.dome[1]
+        for a, kx, ky, ph in self.waves:
+            arg = kx * x + ky * y + ph
+            s, c = a * np.sin(arg), a * np.cos(arg)
+            k = np.array([kx, ky])
+            h = h + s
+            g = g + c[:, None] * k
+            H = H - s[:, None, None] * np.outer(k, k)
+        for a, cx, cy, sig in self.bumps:
+            dx, dy = x - cx, y - cy
+            e = a * np.exp(-(dx * dx + dy * dy) / (2 * sig * sig))
+            w = np.column_stack([dx, dy]) / (sig * sig)
+            h = h + e
+            g = g - e[:, None] * w
+            H = H + e[:, None, None] * (w[:, :, None] * w[:, None, :]
+                                        - np.eye(2) / (sig * sig))
+        return h, g, H
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """Heights ``(N,)`` at plane points ``(N, 2)``."""
+        return self._terms(xy)[0]
+
+    def lift(self, xy: np.ndarray) -> np.ndarray:
+        """Surface points ``(N, 3)`` above plane points ``(N, 2)``."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([xy, self.height(xy)])
+
+    def corners(self) -> np.ndarray:
+        """The surface points above the four corners of ``region``, shape ``(4, 3)``."""
+        x0, x1, y0, y1 = self.region
+        return self.lift([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+
+    def implicit(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        x = _points(x)
+        return x[:, 2] - self.height(x[:, :2])
+
+    def normal(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        x = _points(x)
+        g = self._terms(x[:, :2])[1]
+        return _normalize(np.column_stack([-g, np.ones(len(x))]))
+
+    def closest_point(self, x: np.ndarray) -> np.ndarray:
+        """Closest points by damped Newton iterations on the height-field parameters.
+
+        Exact for points within the surface's smallest radius of curvature (where the
+        closest point is unique), which covers every use here.
+        """
+        x = _points(x)
+        u = x[:, :2].copy()
+        eye = np.eye(2)
+        for _ in range(100):
+            f, g, H = self._terms(u)
+            res = f - x[:, 2]
+            grad = (u - x[:, :2]) + res[:, None] * g
+            hess = eye + g[:, :, None] * g[:, None, :] + res[:, None, None] * H
+            det = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
+            bad = (det <= 1e-12) | (hess[:, 0, 0] <= 0)
+            hess[bad] = eye + g[bad, :, None] * g[bad, None, :]
+            step = np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
+            # Damp long steps: the terms are not quadratic.
+            size = np.linalg.norm(step, axis=1, keepdims=True)
+            step = step * np.minimum(1.0, 0.1 / np.maximum(size, 1e-300))
+            u = u - step
+            if np.max(np.abs(step)) < 1e-15:
+                break
+        return self.lift(u)
+
+    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Local chart ``(u, v) -> (x0 + u, y0 + v, f(...))``: exactly on the surface."""
+        xy0 = np.asarray(x0, dtype=np.float64).reshape(3)[:2]
+
+        def point(uv: np.ndarray) -> np.ndarray:
+            return self.lift(xy0 + np.asarray(uv))[0]
+
+        return point
+
+    def intersect(  # noqa: D102
+        self, origins: np.ndarray, directions: np.ndarray, *, t_min: float = 1e-9
+    ) -> np.ndarray:
+        x0, x1, y0, y1 = self.region
+        px, py = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+        if not hasattr(self, "_box"):
+            gx = np.linspace(x0 - px, x1 + px, 129)
+            gy = np.linspace(y0 - py, y1 + py, 129)
+            hz = self.height(np.stack(np.meshgrid(gx, gy, indexing="ij"), -1).reshape(-1, 2))
+            pad = 0.1 * (float(hz.max() - hz.min()) + px)
+            self._box = (np.array([x0 - px, y0 - py, float(hz.min()) - pad]),
+                         np.array([x1 + px, y1 + py, float(hz.max()) + pad]))
+        lo, hi = self._box
+        o, d = _points(origins), _points(directions)
+        t0, t1 = _box_interval(o, d, lo, hi)
+        t0 = np.maximum(t0, t_min)
+        norm = np.linalg.norm(d, axis=1).max(initial=1.0)
+        return _march(self.implicit, o, d, t0, t1, step=0.002 * max(px, py) / norm)
+
+    def mesh(self, *, resolution: int = 128) -> trimesh.Trimesh:
+        """Grid over ``region`` with ``resolution`` cells along its longer side."""
+        x0, x1, y0, y1 = self.region
+        step = max(x1 - x0, y1 - y0) / resolution
+        nx = max(int(math.ceil((x1 - x0) / step - 1e-9)), 1)
+        ny = max(int(math.ceil((y1 - y0) / step - 1e-9)), 1)
+        xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+        xy = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
+        grid = self.lift(xy.reshape(-1, 2)).reshape(nx + 1, ny + 1, 3)
+        return _grid_mesh(grid, self)
+
+
 # --------------------------------------------------------------------------------------------
 # Lights
 # --------------------------------------------------------------------------------------------
@@ -1297,26 +1773,92 @@ def find_highlight(
         if any(np.linalg.norm(x0 - t) < 1e-9 * (1 + np.linalg.norm(t)) for t in tried):
             continue
         tried.append(x0)
-        chart = surface.chart(x0)
-        t1, t2 = _tangent_basis(surface.normal(x0[None])[0])
-
-        def residual(uv: np.ndarray, chart: Callable = chart, t1: np.ndarray = t1,
-                     t2: np.ndarray = t2) -> np.ndarray:
-            x = chart(uv)[None]
-            n = surface.normal(x)[0]
-            h = _normalize(light.towards(x, c) + _normalize(c - x))[0]
-            tang = h - np.dot(h, n) * n
-            return np.array([np.dot(tang, t1), np.dot(tang, t2)])
-
-        sol = root(residual, np.zeros(2), method="hybr", options={"xtol": 1e-15})
-        x = chart(sol.x)
-        if not np.all(np.isfinite(x)):
-            continue
-        if _bisector_error(surface, x[None], c, light)[0] > tol:
-            continue
-        if _in_patch(patch, x[None])[0] and _visible(surface, c, x):
+        x = _refine_highlight(surface, x0, c, light, tol=tol)
+        if x is not None and _in_patch(patch, x[None])[0] and _visible(surface, c, x):
             return x
     return None
+
+
+def _refine_highlight(surface: Surface, x0: np.ndarray, c: np.ndarray, light: LightModel, *,
+                      tol: float) -> np.ndarray | None:
+    """Solve for the point near ``x0`` whose normal bisects light and view, on a chart."""
+    chart = surface.chart(x0)
+    t1, t2 = _tangent_basis(surface.normal(x0[None])[0])
+
+    def residual(uv: np.ndarray) -> np.ndarray:
+        x = chart(uv)[None]
+        n = surface.normal(x)[0]
+        h = _normalize(light.towards(x, c) + _normalize(c - x))[0]
+        tang = h - np.dot(h, n) * n
+        return np.array([np.dot(tang, t1), np.dot(tang, t2)])
+
+    sol = root(residual, np.zeros(2), method="hybr", options={"xtol": 1e-15})
+    x = chart(sol.x)
+    if not np.all(np.isfinite(x)):
+        return None
+    if _bisector_error(surface, x[None], c, light)[0] > tol:
+        return None
+    return x
+
+
+def find_highlights(
+    surface: Surface,
+    centre: Sequence[float],
+    light: LightModel | dict,
+    *,
+    candidates: np.ndarray,
+    patch: Sequence[Halfspace] = (),
+    max_count: int = 4,
+    separation: float | None = None,
+    seeds: int = 24,
+    tol: float = 1e-11,
+) -> np.ndarray:
+    """Every visible highlight a camera at ``centre`` sees (a non-convex surface has several).
+
+    The candidates whose normal is within 0.5 radian of the bisector of light and view are
+    grouped greedily (best first, one seed per ``separation``); each seed is refined as in
+    :func:`find_highlight`, and the distinct valid points (in ``patch``, facing camera and
+    light, visible) are kept, nearest to the camera first.
+
+    Args:
+        surface: An analytic surface (not a :class:`MeshSurface`).
+        centre: Camera centre ``(3,)``.
+        light: The light.
+        candidates: Dense surface points ``(N, 3)`` to start from.
+        patch: Half-spaces the highlights must lie in.
+        max_count: Most highlights returned.
+        separation: Smallest distance between two seeds; default a tenth of the candidates'
+            bounding-box diagonal.
+        seeds: Most seeds refined.
+        tol: Largest accepted angle (radians) between the normal and the bisector.
+
+    Returns:
+        The highlight points ``(K, 3)``, ``K <= max_count`` (possibly 0).
+    """
+    c = _vec3(centre, "centre")
+    light = as_light(light)
+    cand = _points(candidates)
+    if separation is None:
+        separation = 0.1 * float(np.linalg.norm(np.ptp(cand, axis=0)))
+    err = _bisector_error(surface, cand, c, light)
+    order = np.argsort(err)
+    order = order[err[order] < 0.5]
+    chosen: list[np.ndarray] = []
+    for i in order:
+        if len(chosen) >= seeds:
+            break
+        if all(np.linalg.norm(cand[i] - s) >= separation for s in chosen):
+            chosen.append(cand[i])
+    found: list[np.ndarray] = []
+    for s in chosen:
+        x = _refine_highlight(surface, surface.closest_point(s[None])[0], c, light, tol=tol)
+        if x is None or not _in_patch(patch, x[None])[0] or not _visible(surface, c, x):
+            continue
+        if any(np.linalg.norm(x - f) < 1e-7 * (1 + np.linalg.norm(f)) for f in found):
+            continue
+        found.append(x)
+    found.sort(key=lambda x: float(np.linalg.norm(x - c)))
+    return np.asarray(found[:max_count], dtype=np.float64).reshape(-1, 3)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1404,6 +1946,12 @@ class SyntheticScene:
         intrinsics: Intrinsics shared by the cameras.
         patch: Half-spaces that cut the truth mesh out of the surface.
         mesh_options: Options passed to ``surface.mesh`` for the truth mesh.
+        closed: Whether the truth mesh is closed (watertight) rather than an open surface.
+        euler: Euler number (V - E + F) of the truth mesh: 2 for a sphere, 0 for a torus or
+            an open tube, 1 for a patch (a disc); ``None`` when not stated.
+        false_highlights: How outliers were drawn: ``"image"`` (a pixel anywhere in the
+            image) or ``"surface"`` (a pixel whose ray meets the truth where the normal of
+            the reflection law is wrong by 15 degrees or more).
     """
 
     name: str
@@ -1418,6 +1966,9 @@ class SyntheticScene:
     intrinsics: Intrinsics
     patch: tuple[Halfspace, ...] = ()
     mesh_options: dict = field(default_factory=dict)
+    closed: bool = False
+    euler: int | None = None
+    false_highlights: str = "image"
 
     @property
     def cameras(self) -> list[np.ndarray]:
@@ -1472,6 +2023,9 @@ class SyntheticScene:
             "outliers": np.flatnonzero(self.outlier_mask).tolist(),
             "camera_centres": self.camera_centres.tolist(),
             "intrinsics": self.intrinsics.to_dict(),
+            "closed": bool(self.closed),
+            "euler": self.euler,
+            "false_highlights": self.false_highlights,
         }
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -1500,11 +2054,56 @@ class SyntheticScene:
         return text
 
 
+def _false_pixels(
+    pixels: np.ndarray,
+    mask: np.ndarray,
+    *,
+    surface: Surface,
+    cameras: Sequence[np.ndarray],
+    centres: np.ndarray,
+    camera_of: np.ndarray,
+    lights: Sequence[LightModel],
+    intrinsics: Intrinsics,
+    domain: dict,
+    patch: Sequence[Halfspace],
+    seed: int,
+    min_angle: float = 15.0,
+    tries: int = 256,
+) -> np.ndarray:
+    """Move each outlier onto a pixel whose ray meets the truth where the law's normal is wrong.
+
+    For every masked specularity, pixels of its camera are drawn uniformly (seeded) until one's
+    ray first meets the surface inside the domain and the patch at a point where the normal
+    the reflection law gives differs from the true one by at least ``min_angle`` degrees: a
+    false highlight on the object, as a glint of another light or a texture would give. If no
+    draw qualifies the uniform pixel is kept.
+    """
+    out = pixels.copy()
+    rng = np.random.default_rng([int(seed), 104729])
+    size = np.array([intrinsics.width - 1, intrinsics.height - 1], dtype=np.float64)
+    cos_min = math.cos(math.radians(min_angle))
+    for i in np.flatnonzero(mask):
+        k = int(camera_of[i])
+        trial = rng.uniform(0.0, 1.0, size=(tries, 2)) * size
+        c, r = pixel_rays(cameras[k], trial)
+        t = surface.intersect(np.tile(c, (tries, 1)), r)
+        hit = np.isfinite(t)
+        x = c + np.where(hit, t, 0.0)[:, None] * r
+        ok = hit & _inside_box(domain, x) & _in_patch(patch, x)
+        if not np.any(ok):
+            continue
+        N = _normalize(lights[k].towards(x, c) - r)
+        ok &= _dot(N, surface.normal(x)) < cos_min
+        if np.any(ok):
+            out[i] = trial[int(np.argmax(ok))]
+    return out
+
+
 def _assemble(
     *,
     name: str,
     surface: Surface,
-    light: LightModel,
+    light: LightModel | Sequence[LightModel],
     cameras: list[np.ndarray],
     centres: list[np.ndarray],
     truth: np.ndarray,
@@ -1517,6 +2116,10 @@ def _assemble(
     noise: float,
     outliers: float,
     seed: int,
+    camera_of: np.ndarray | None = None,
+    false_highlights: str = "image",
+    closed: bool = False,
+    euler: int | None = None,
 ) -> SyntheticScene:
     dom = _domain_dict(domain)
     centres_arr = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
@@ -1529,21 +2132,39 @@ def _assemble(
         if np.any(out):
             i = int(np.flatnonzero(out)[0])
             raise SceneError(f"domain: {label} {i} at {arr[i].tolist()} lies outside it")
+    per_camera = not isinstance(light, DirectionalLight | PointLight | CameraLight)
+    lights = list(light) if per_camera else [light] * len(cameras)
+    if len(lights) != len(cameras):
+        raise SceneError(f"light: {len(lights)} lights given for {len(cameras)} cameras")
+    cam_of = (np.arange(len(truth)) if camera_of is None
+              else np.asarray(camera_of, dtype=np.int64).reshape(-1))
     noisy, mask = corrupt_pixels(pixels, intrinsics=intrinsics, noise=noise,
                                  outliers=outliers, seed=seed)
+    if false_highlights == "surface" and np.any(mask):
+        noisy = _false_pixels(noisy, mask, surface=surface, cameras=cameras,
+                              centres=centres_arr, camera_of=cam_of, lights=lights,
+                              intrinsics=intrinsics, domain=dom, patch=patch, seed=seed)
+    elif false_highlights not in ("image", "surface"):
+        raise SceneError(f"false_highlights: expected 'image' or 'surface', got "
+                         f"{false_highlights!r}")
     normals = surface.normal(truth)
-    light_dirs = np.stack([light.towards(truth[i][None], centres_arr[i])[0]
-                           for i in range(len(truth))]) if len(truth) else np.zeros((0, 3))
-    scene_dict = {
-        "format": "warpspec-scene",
-        "version": 1,
-        "cameras": [{"P": np.asarray(P, dtype=np.float64).tolist()} for P in cameras],
-        "light": light.to_dict(),
-        "specularities": [{"camera": i, "pixel": [float(p[0]), float(p[1])]}
-                          for i, p in enumerate(noisy)],
+    light_dirs = np.stack([lights[k].towards(truth[i][None], centres_arr[k])[0]
+                           for i, k in enumerate(cam_of)]) if len(truth) else np.zeros((0, 3))
+    cam_dicts = []
+    for P, li in zip(cameras, lights, strict=True):
+        entry: dict = {"P": np.asarray(P, dtype=np.float64).tolist()}
+        if per_camera:
+            entry["light"] = li.to_dict()
+        cam_dicts.append(entry)
+    scene_dict: dict = {"format": "warpspec-scene", "version": 1, "cameras": cam_dicts}
+    if not per_camera:
+        scene_dict["light"] = light.to_dict()
+    scene_dict.update({
+        "specularities": [{"camera": int(k), "pixel": [float(p[0]), float(p[1])]}
+                          for k, p in zip(cam_of, noisy, strict=True)],
         "points": pts.tolist(),
         "domain": dom,
-    }
+    })
     return SyntheticScene(
         name=name,
         scene_dict=scene_dict,
@@ -1557,6 +2178,9 @@ def _assemble(
         intrinsics=intrinsics,
         patch=tuple(patch),
         mesh_options=dict(mesh_options or {}),
+        closed=closed,
+        euler=euler,
+        false_highlights=false_highlights,
     )
 
 
@@ -1579,6 +2203,9 @@ def scene_from_points(
     outliers: float = 0.0,
     seed: int = 0,
     layout_seed: int = 0,
+    false_highlights: str = "image",
+    closed: bool = False,
+    euler: int | None = None,
 ) -> SyntheticScene:
     """A scene with one camera per chosen specular point, each seeing its highlight there.
 
@@ -1602,6 +2229,9 @@ def scene_from_points(
         outliers: Fraction of specularities replaced by random pixels.
         seed: Seed of the noise and the outliers.
         layout_seed: Seed of the highlight pixels (the geometry).
+        false_highlights: How outliers are drawn (see :func:`scene_from_path`).
+        closed: Whether the truth mesh is closed.
+        euler: Euler number of the truth mesh.
 
     Returns:
         The scene with its ground truth.
@@ -1638,14 +2268,15 @@ def scene_from_points(
     return _assemble(name=name, surface=surface, light=light, cameras=cams, centres=centres,
                      truth=truth, pixels=np.asarray(pix).reshape(-1, 2), points=points,
                      domain=domain, intrinsics=intrinsics, patch=patch,
-                     mesh_options=mesh_options, noise=noise, outliers=outliers, seed=seed)
+                     mesh_options=mesh_options, noise=noise, outliers=outliers, seed=seed,
+                     false_highlights=false_highlights, closed=closed, euler=euler)
 
 
 def scene_from_path(
     surface: Surface,
     centres: np.ndarray,
     *,
-    light: LightModel | dict,
+    light: LightModel | dict | Sequence[LightModel | dict],
     look_at_points: np.ndarray,
     points: np.ndarray,
     domain: Any,
@@ -1658,16 +2289,22 @@ def scene_from_path(
     noise: float = 0.0,
     outliers: float = 0.0,
     seed: int = 0,
+    per_view: int = 1,
+    false_highlights: str = "image",
+    closed: bool = False,
+    euler: int | None = None,
 ) -> SyntheticScene:
     """A scene from cameras along a path, like a video: each sees the highlight where it falls.
 
-    For each camera centre the highlight is searched on the surface (:func:`find_highlight`);
-    views without a valid highlight (none in the patch, hidden, outside the image) are skipped.
+    For each camera centre the highlight is searched on the surface (:func:`find_highlight`,
+    or :func:`find_highlights` when ``per_view > 1``); views without a valid highlight (none in
+    the patch, hidden, outside the image) are skipped.
 
     Args:
         surface: The true surface.
         centres: Camera centres along the path ``(K, 3)``.
-        light: The light.
+        light: The light, or a list of one light per camera (written as each camera's own
+            ``light``).
         look_at_points: What each camera looks at (image centre): ``(3,)`` or ``(K, 3)``.
         points: Point constraints ``(S, 3)``.
         domain: Domain box (see :func:`scene_from_points`).
@@ -1679,40 +2316,64 @@ def scene_from_path(
         name: Scene name.
         mesh_options: Options of ``surface.mesh`` for the truth mesh.
         noise: Pixel noise standard deviation (pixels).
-        outliers: Fraction of specularities replaced by random pixels.
+        outliers: Fraction of specularities replaced by false ones.
         seed: Seed of the noise and the outliers.
+        per_view: Most highlights kept per view (a non-convex surface shows several).
+        false_highlights: ``"image"``: outliers anywhere in the image; ``"surface"``: on the
+            object, with a wrong normal (see :class:`SyntheticScene`).
+        closed: Whether the truth mesh is closed.
+        euler: Euler number of the truth mesh.
 
     Returns:
-        The scene with its ground truth (one specularity per kept view).
+        The scene with its ground truth (the kept views; their specularities in view order).
 
     Raises:
         SceneError: If no view has a valid highlight, or the domain does not fit.
     """
     intrinsics = intrinsics or Intrinsics()
-    light = as_light(light)
     centres = _points(centres)
+    if isinstance(light, dict | DirectionalLight | PointLight | CameraLight):
+        lights = [as_light(light)] * len(centres)
+        shared: LightModel | None = lights[0] if len(lights) else as_light(light)
+    else:
+        lights = [as_light(li) for li in light]
+        shared = None
+        if len(lights) != len(centres):
+            raise SceneError(f"light: {len(lights)} lights given for {len(centres)} cameras")
     targets = np.broadcast_to(np.asarray(look_at_points, dtype=np.float64), centres.shape)
     if candidates is None and not isinstance(surface, MeshSurface):
         candidates = clip_mesh(surface.mesh(**(mesh_options or {})), patch).vertices
-    cams, kept, truth, pix = [], [], [], []
-    for c, target in zip(centres, targets, strict=True):
-        x = find_highlight(surface, c, light, candidates=candidates, patch=patch)
-        if x is None:
+    cams, kept, kept_lights, truth, pix, cam_of = [], [], [], [], [], []
+    for c, target, li in zip(centres, targets, lights, strict=True):
+        if per_view > 1 and not isinstance(surface, MeshSurface):
+            found = find_highlights(surface, c, li, candidates=candidates, patch=patch,
+                                    max_count=per_view)
+        else:
+            x = find_highlight(surface, c, li, candidates=candidates, patch=patch)
+            found = np.zeros((0, 3)) if x is None else x[None]
+        if len(found) == 0:
             continue
         P = look_at(c, target, intrinsics=intrinsics, up=up)
-        q, depth = project(P, x[None])
-        if not (depth[0] > 0 and intrinsics.contains(q)[0]):
+        q, depth = project(P, found)
+        ok = (depth > 0) & intrinsics.contains(q)
+        if not np.any(ok):
             continue
+        for x, qq in zip(found[ok], q[ok], strict=True):
+            truth.append(x)
+            pix.append(qq)
+            cam_of.append(len(cams))
         cams.append(P)
         kept.append(c)
-        truth.append(x)
-        pix.append(q[0])
+        kept_lights.append(li)
     if not cams:
         raise SceneError("path: no view sees a valid highlight")
-    return _assemble(name=name, surface=surface, light=light, cameras=cams, centres=kept,
-                     truth=np.asarray(truth), pixels=np.asarray(pix), points=points,
-                     domain=domain, intrinsics=intrinsics, patch=patch,
-                     mesh_options=mesh_options, noise=noise, outliers=outliers, seed=seed)
+    return _assemble(name=name, surface=surface,
+                     light=shared if shared is not None else kept_lights, cameras=cams,
+                     centres=kept, truth=np.asarray(truth), pixels=np.asarray(pix),
+                     points=points, domain=domain, intrinsics=intrinsics, patch=patch,
+                     mesh_options=mesh_options, noise=noise, outliers=outliers, seed=seed,
+                     camera_of=np.asarray(cam_of), false_highlights=false_highlights,
+                     closed=closed, euler=euler)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1744,7 +2405,7 @@ def octant(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synth
     patch = tuple(Halfspace(np.zeros(3), e) for e in np.eye(3))
     return scene_from_points(
         sphere, spec, light=DirectionalLight(np.ones(3)), points=np.eye(3),
-        domain=([-0.1] * 3, [1.15] * 3), distance=3.0, patch=patch, name="octant",
+        domain=([-0.1] * 3, [1.15] * 3), distance=3.0, patch=patch, name="octant", euler=1,
         mesh_options={"subdivisions": 5}, noise=noise, outliers=outliers, seed=seed,
     )
 
@@ -1778,7 +2439,7 @@ def car_window(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> S
     domain = (box.min(axis=0) - 0.15, box.max(axis=0) + 0.15)
     return scene_from_points(
         cyl, spec, light=DirectionalLight((0.3, -0.6, 1.0)), points=corners, domain=domain,
-        distance=3.0, patch=patch, name="car-window", mesh_options={"sections": 64},
+        distance=3.0, patch=patch, name="car-window", euler=1, mesh_options={"sections": 64},
         noise=noise, outliers=outliers, seed=seed,
     )
 
@@ -1815,7 +2476,7 @@ def wine_bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> 
     domain = (box.min(axis=0) - 0.01, box.max(axis=0) + 0.01)
     return scene_from_path(
         cyl, centres, light=CameraLight(), look_at_points=(0.0, 0.0, 0.15), points=pts,
-        domain=domain, patch=patch, name="wine-bottle", mesh_options={"sections": 96},
+        domain=domain, patch=patch, name="wine-bottle", euler=1, mesh_options={"sections": 96},
         noise=noise, outliers=outliers, seed=seed,
     )
 
@@ -1837,7 +2498,7 @@ def ellipsoid_cap(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     return scene_from_points(
         ell, spec, light=PointLight((0.6, -0.4, 3.0)), points=pts,
         domain=([-0.95, -0.7, 0.1], [0.95, 0.7, 0.62]), distance=2.5,
-        patch=(Halfspace((0, 0, 0.25), (0, 0, 1)),), name="ellipsoid-cap",
+        patch=(Halfspace((0, 0, 0.25), (0, 0, 1)),), name="ellipsoid-cap", euler=1,
         mesh_options={"subdivisions": 5}, noise=noise, outliers=outliers, seed=seed,
     )
 
@@ -1855,7 +2516,7 @@ def paraboloid(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> S
     spec = spread_points(surf.lift(xy), 25, start=(0.0, 0.0, 0.3))
     return scene_from_points(
         surf, spec, light=DirectionalLight((0.2, -0.1, 1.0)), points=surf.corners(),
-        domain=([-0.6, -0.6, -0.2], [0.6, 0.6, 0.45]), distance=2.5, name="paraboloid",
+        domain=([-0.6, -0.6, -0.2], [0.6, 0.6, 0.45]), distance=2.5, name="paraboloid", euler=1,
         mesh_options={"resolution": 96}, noise=noise, outliers=outliers, seed=seed,
     )
 
@@ -1874,8 +2535,319 @@ def saddle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synth
     pts = np.concatenate([surf.corners(), [[0.0, 0.0, 0.0]]])
     return scene_from_points(
         surf, spec, light=DirectionalLight((-0.2, 0.3, 1.0)), points=pts,
-        domain=([-0.6, -0.6, -0.25], [0.6, 0.6, 0.25]), distance=2.5, name="saddle",
+        domain=([-0.6, -0.6, -0.25], [0.6, 0.6, 0.25]), distance=2.5, name="saddle", euler=1,
         mesh_options={"resolution": 96}, noise=noise, outliers=outliers, seed=seed,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes of every shape class, their geometry varied by the seed
+# --------------------------------------------------------------------------------------------
+
+FREEFORM_HIGHLIGHTS = 60
+"""Default number of highlights of the ``freeform`` scene."""
+
+DOMAIN_MARGIN = 0.12
+"""Margin of the domain around a closed object, as a fraction of its largest extent."""
+
+
+def _shape_rng(seed: int, name: str) -> np.random.Generator:
+    """The generator of a scene's geometry: its own stream, apart from the noise's."""
+    return np.random.default_rng([int(seed), zlib.crc32(name.encode())])
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def _around(count: int, rng: np.random.Generator, *, jitter: float = 0.25) -> np.ndarray:
+    """``count`` unit directions all around (both hemispheres), rotated and jittered."""
+    d = _fibonacci_sphere(count) @ _random_rotation(rng).T
+    d += jitter / math.sqrt(count) * rng.standard_normal(d.shape)
+    return _normalize(d)
+
+
+def _margin_box(vertices: np.ndarray, margin: float = DOMAIN_MARGIN
+                ) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    pad = margin * float(np.max(hi - lo))
+    return lo - pad, hi + pad
+
+
+def _pick_points(candidates: np.ndarray, surface: Surface, count: int,
+                 rng: np.random.Generator) -> np.ndarray:
+    """``count`` spread surface points among ``candidates``, which ones chosen by ``rng``."""
+    cand = _points(candidates)
+    cand = cand[rng.choice(len(cand), size=min(len(cand), 400), replace=False)]
+    start = cand[int(rng.integers(len(cand)))]
+    return surface.closest_point(spread_points(cand, count, start=start))
+
+
+def _seen(surface: Surface, x: np.ndarray, light: LightModel, distance: float,
+          *, min_cos: float = 0.05) -> np.ndarray:
+    """Whether a camera placed by :func:`place_camera` at ``distance`` sees each point ``x``."""
+    n = surface.normal(x)
+    if isinstance(light, CameraLight):
+        v, ok = n, np.ones(len(x), dtype=bool)
+    else:
+        L = light.towards(x)
+        ok = _dot(n, L) >= min_cos
+        v = _normalize(reflect(n, L))
+    c = x + distance * v
+    ok &= surface.implicit(c) > 0
+    d = x - c
+    t = surface.intersect(c, d / distance, t_min=1e-9 * distance)
+    return ok & np.isfinite(t) & (np.abs(t - distance) <= 1e-7 * distance)
+
+
+def _points_scene(surface: Surface, candidates: np.ndarray, count: int, *, light: LightModel,
+                  distance: float, rng: np.random.Generator, **options: Any) -> SyntheticScene:
+    """:func:`scene_from_points` with ``count`` well-spread candidates that can be seen."""
+    order = spread_points(candidates, min(len(candidates), 2 * count + 20),
+                          start=candidates[int(rng.integers(len(candidates)))])
+    good = order[_seen(surface, surface.closest_point(order), light, distance)]
+    if len(good) < count:
+        raise SceneError(f"highlights: only {len(good)} of the {count} asked can be seen")
+    return scene_from_points(surface, good[:count], light=light, distance=distance,
+                             layout_seed=int(rng.integers(2**31)), **options)
+
+
+def sphere_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
+                  ) -> SyntheticScene:
+    """A whole sphere seen all around by 28 flash cameras (one highlight each), 6 points.
+
+    Radius 0.9-1.1 and centre within 0.1 of the origin (by seed); cameras on jittered
+    directions covering both hemispheres at 3-3.4 radii from the centre; domain: the sphere's
+    box grown by 12% of its diameter on each side. Outliers are false highlights on the
+    sphere.
+    """
+    rng = _shape_rng(seed, "sphere-around")
+    radius = float(rng.uniform(0.9, 1.1))
+    centre = rng.uniform(-0.1, 0.1, 3)
+    surf = Sphere(centre, radius)
+    mesh = surf.mesh(subdivisions=5)
+    centres = centre + radius * rng.uniform(3.0, 3.4) * _around(28, rng)
+    return scene_from_path(
+        surf, centres, light=CameraLight(), look_at_points=centre,
+        points=_pick_points(mesh.vertices, surf, 6, rng), domain=_margin_box(mesh.vertices),
+        candidates=mesh.vertices, name="sphere-around", mesh_options={"subdivisions": 5},
+        noise=noise, outliers=outliers, seed=seed, false_highlights="surface", closed=True,
+        euler=2,
+    )
+
+
+def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
+                     ) -> SyntheticScene:
+    """A whole ellipsoid (axes about 1, 0.82, 0.67) seen all around, one lamp per camera.
+
+    28 cameras on jittered directions all around at 3.2 from the centre; each carries its own
+    directional light, 25-40 degrees off its viewing direction, and sees one highlight. Six
+    points; domain: the box grown by 12% of the longest axis. The seed varies the radii (by
+    up to 6%), the centre, the cameras and the lights.
+    """
+    rng = _shape_rng(seed, "ellipsoid-around")
+    radii = np.array([1.0, 0.82, 0.67]) * rng.uniform(0.94, 1.06, 3)
+    centre = rng.uniform(-0.1, 0.1, 3)
+    surf = Ellipsoid(centre, radii)
+    mesh = surf.mesh(subdivisions=5)
+    dirs = _around(28, rng)
+    lights = []
+    for d in dirs:
+        t1, t2 = _tangent_basis(d)
+        a = rng.uniform(0, 2 * math.pi)
+        tilt = math.radians(rng.uniform(25.0, 40.0))
+        lights.append(DirectionalLight(math.cos(tilt) * d + math.sin(tilt)
+                                       * (math.cos(a) * t1 + math.sin(a) * t2)))
+    return scene_from_path(
+        surf, centre + 3.2 * dirs, light=lights, look_at_points=centre,
+        points=_pick_points(mesh.vertices, surf, 6, rng), domain=_margin_box(mesh.vertices),
+        candidates=mesh.vertices, name="ellipsoid-around", mesh_options={"subdivisions": 5},
+        noise=noise, outliers=outliers, seed=seed, false_highlights="surface", closed=True,
+        euler=2,
+    )
+
+
+def torus(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+    """A ring torus (tube about 0.35 of the major radius) seen all around by flash cameras.
+
+    Major radius 0.95-1.05, tube 0.33-0.37 of it, axis tilted up to about 10 degrees from
+    ``z`` (by seed). 30 cameras on jittered directions all around at 4 from the centre plus
+    one above and one below looking through the hole; each keeps up to 3 visible highlights
+    (a torus shows several). Eight points; domain: the box grown by 12% of the diameter.
+    """
+    rng = _shape_rng(seed, "torus")
+    major = float(rng.uniform(0.95, 1.05))
+    minor = major * float(rng.uniform(0.33, 0.37))
+    axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.1 * rng.standard_normal(3))
+    centre = rng.uniform(-0.1, 0.1, 3)
+    surf = Torus(centre, axis, major, minor)
+    mesh = surf.mesh()
+    dirs = _around(30, rng)
+    t1, _ = _tangent_basis(axis)
+    poles = [_normalize(s * axis + 0.12 * t1 + 0.05 * rng.standard_normal(3)) for s in (1, -1)]
+    dirs = np.concatenate([dirs, poles])
+    return scene_from_path(
+        surf, centre + 4.0 * dirs, light=CameraLight(), look_at_points=centre,
+        points=_pick_points(mesh.vertices, surf, 8, rng), domain=_margin_box(mesh.vertices),
+        candidates=mesh.vertices, intrinsics=Intrinsics(focal=560.0), up=axis,
+        name="torus", noise=noise, outliers=outliers, seed=seed, per_view=3,
+        false_highlights="surface", closed=True, euler=0,
+    )
+
+
+def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+    """A bottle (body, shoulder, neck; a surface of revolution) seen by two rings of flashes.
+
+    Body radius about 0.35, neck about 0.13, shoulder about 0.35 above the base point, axis
+    near ``z`` (all varied by seed). 14 cameras on a ring at the body's height and 14 above the
+    shoulder, 1.6 from the axis; each keeps up to 2 highlights. Six points. The domain holds
+    the bottle's width with a 12% margin and cuts its body below (height -0.45) and its neck
+    above (height 0.85), so the truth is an open tube (Euler number 0).
+    """
+    rng = _shape_rng(seed, "bottle")
+    axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.05 * rng.standard_normal(3))
+    base = rng.uniform(-0.05, 0.05, 3)
+    body = 0.35 * float(rng.uniform(0.93, 1.07))
+    surf = Revolution(base, axis, body=body, neck=0.13 * float(rng.uniform(0.9, 1.1)),
+                      shoulder=0.35 + float(rng.uniform(-0.04, 0.04)),
+                      width=0.09 * float(rng.uniform(0.9, 1.1)))
+    # The domain: heights -0.45..0.85 along z, the width with a margin (the axis leans a bit,
+    # so the cut is taken along z through the tube's ends).
+    lo_z, hi_z = base[2] - 0.45, base[2] + 0.85
+    pad = DOMAIN_MARGIN * 2 * body
+    h_lo = (lo_z - base[2]) / axis[2] - 0.2
+    h_hi = (hi_z - base[2]) / axis[2] + 0.2
+    full = surf.mesh(extent=(h_lo, h_hi))
+    patch = (Halfspace((0, 0, lo_z), (0, 0, 1)), Halfspace((0, 0, hi_z), (0, 0, -1)))
+    verts = clip_mesh(full, patch).vertices
+    lo = np.append(verts.min(axis=0)[:2] - pad, lo_z)
+    hi = np.append(verts.max(axis=0)[:2] + pad, hi_z)
+    centres, targets = [], []
+    for height, aim in ((0.0, 0.0), (1.05, 0.45)):
+        az = np.linspace(0, 2 * math.pi, 14, endpoint=False) + rng.uniform(0, 2 * math.pi)
+        az = az + rng.uniform(-0.1, 0.1, len(az))
+        ring = 1.6 * (np.cos(az)[:, None] * surf.e1 + np.sin(az)[:, None] * surf.e2)
+        centres.append(base + ring + (height + rng.uniform(-0.05, 0.05, (len(az), 1))) * axis)
+        targets.append(np.tile(base + aim * axis, (len(az), 1)))
+    return scene_from_path(
+        surf, np.concatenate(centres), light=CameraLight(),
+        look_at_points=np.concatenate(targets),
+        points=_pick_points(verts[(verts[:, 2] > lo_z + 0.05) & (verts[:, 2] < hi_z - 0.05)],
+                            surf, 6, rng), domain=(lo, hi),
+        candidates=verts, patch=patch, up=axis, name="bottle",
+        mesh_options={"extent": (h_lo, h_hi)}, noise=noise, outliers=outliers, seed=seed,
+        per_view=2, false_highlights="surface", closed=False, euler=0,
+    )
+
+
+def wrap(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+    """A cylinder patch wrapping 200-240 degrees around its axis, seen from its convex side.
+
+    Radius about 0.5, axial length about 0.8, axis near ``z`` (by seed); 36 highlights spread
+    over the patch (inset from its edges), each seen by its own flash camera 2 from the point
+    along the normal: a ring of cameras around the axis. Five points; domain: the patch's box
+    grown by 12% of its size. An open patch (Euler number 1).
+    """
+    rng = _shape_rng(seed, "wrap")
+    radius = 0.5 * float(rng.uniform(0.93, 1.07))
+    span = math.radians(float(rng.uniform(200.0, 240.0)))
+    start = float(rng.uniform(0, 2 * math.pi))
+    half = 0.4 * float(rng.uniform(0.9, 1.1))
+    axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.08 * rng.standard_normal(3))
+    cyl = Cylinder(rng.uniform(-0.05, 0.05, 3), axis, radius, extent=(-half, half),
+                   angles=(start, start + span))
+    a, h = np.meshgrid(start + span * np.linspace(0.05, 0.95, 61),
+                       np.linspace(-0.85, 0.85, 31) * half)
+    cand = cyl.at(a.ravel(), h.ravel())
+    mesh = cyl.mesh(sections=128)
+    corners = cyl.at(start + span * np.array([0.02, 0.98, 0.98, 0.02, 0.5]),
+                     half * np.array([-0.95, -0.95, 0.95, 0.95, 0.0]))
+    return _points_scene(
+        cyl, cand, 36, light=CameraLight(), distance=2.0, rng=rng, points=corners,
+        domain=_margin_box(mesh.vertices), up=axis, name="wrap",
+        mesh_options={"sections": 128}, noise=noise, outliers=outliers, seed=seed,
+        false_highlights="surface", closed=False, euler=1,
+    )
+
+
+def _freeform_surface(rng: np.random.Generator) -> FreeformHeightField:
+    waves = []
+    for _ in range(3):
+        k = 2 * math.pi * float(rng.uniform(0.7, 1.4))
+        ang = float(rng.uniform(0, math.pi))
+        waves.append((float(rng.uniform(0.03, 0.05)), k * math.cos(ang), k * math.sin(ang),
+                      float(rng.uniform(0, 2 * math.pi))))
+    bump = (float(rng.uniform(0.1, 0.14)), *rng.uniform(-0.2, 0.2, 2),
+            float(rng.uniform(0.11, 0.15)))
+    return FreeformHeightField(waves=waves, bumps=[bump], region=(-0.5, 0.5, -0.5, 0.5))
+
+
+def freeform(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
+             highlights: int = FREEFORM_HIGHLIGHTS) -> SyntheticScene:
+    """A free-form height-field patch (three sine waves and a Gaussian bump), seen from above.
+
+    Over ``[-0.5, 0.5]^2``: waves of amplitude 0.03-0.05 and wavelength 0.7-1.4, a bump of
+    height 0.10-0.14 (all by seed); ``highlights`` (default 60) highlights spread over the
+    patch, each seen by its own camera 2.5 away under a directional light near ``+z``. Five
+    points (four near the corners, one inside); domain: the patch grown by 0.12 each side.
+
+    Raises:
+        SceneError: If ``highlights`` is not an integer from 4 to 400.
+    """
+    if isinstance(highlights, bool) or not isinstance(highlights, int | np.integer) or not (
+            4 <= highlights <= 400):
+        raise SceneError(f"highlights: must be an integer from 4 to 400, got {highlights!r}")
+    rng = _shape_rng(seed, "freeform")
+    surf = _freeform_surface(rng)
+    light = DirectionalLight(np.array([0.0, 0.0, 1.0]) + 0.25 * rng.standard_normal(3) * [1, 1, 0])
+    g = np.linspace(-0.46, 0.46, 93)
+    cand = surf.lift(np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2))
+    corners = np.array([[-0.44, -0.44], [0.44, -0.44], [0.44, 0.44], [-0.44, 0.44]])
+    corners = corners + rng.uniform(-0.03, 0.03, corners.shape)
+    pts = surf.lift(np.concatenate([corners, rng.uniform(-0.25, 0.25, (1, 2))]))
+    return _points_scene(
+        surf, cand, int(highlights), light=light, distance=2.5, rng=rng, points=pts,
+        domain=_sheet_domain(surf), name="freeform", mesh_options={"resolution": 128},
+        noise=noise, outliers=outliers, seed=seed, false_highlights="surface",
+        closed=False, euler=1,
+    )
+
+
+def _sheet_domain(surf: FreeformHeightField, margin: float = DOMAIN_MARGIN
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """A box that the sheet cuts through: the region grown by ``margin``, heights padded."""
+    x0, x1, y0, y1 = surf.region
+    g = np.stack(np.meshgrid(np.linspace(x0 - margin, x1 + margin, 97),
+                             np.linspace(y0 - margin, y1 + margin, 97), indexing="ij"), -1)
+    hz = surf.height(g.reshape(-1, 2))
+    return (np.array([x0 - margin, y0 - margin, hz.min() - margin]),
+            np.array([x1 + margin, y1 + margin, hz.max() + margin]))
+
+
+def point_light(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+    """A bumpy dome lit by a point lamp 2 above it: 30 highlights, 5 points.
+
+    Dome ``0.3 - 0.5 x^2 - 0.4 y^2`` (coefficients varied by up to 15%) with two Gaussian bumps
+    of height 0.04-0.06 over ``[-0.5, 0.5]^2``; the lamp within 0.3 of the axis at height 2;
+    each highlight seen by its own camera 2.5 away. Domain: the patch grown by 0.12.
+    """
+    rng = _shape_rng(seed, "point-light")
+    bumps = [(float(rng.uniform(0.04, 0.06)), *rng.uniform(-0.3, 0.3, 2),
+              float(rng.uniform(0.09, 0.13))) for _ in range(2)]
+    surf = FreeformHeightField(z0=0.3, dome=np.array([0.5, 0.4]) * rng.uniform(0.85, 1.15, 2),
+                               bumps=bumps, region=(-0.5, 0.5, -0.5, 0.5))
+    lamp = PointLight(np.append(rng.uniform(-0.3, 0.3, 2), 2.0))
+    g = np.linspace(-0.46, 0.46, 71)
+    cand = surf.lift(np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2))
+    pts = surf.lift(np.array([[-0.45, -0.45], [0.45, -0.45], [0.45, 0.45], [-0.45, 0.45],
+                              [0.0, 0.0]]) + rng.uniform(-0.03, 0.03, (5, 2)))
+    return _points_scene(
+        surf, cand, 30, light=lamp, distance=2.5, rng=rng, points=pts,
+        domain=_sheet_domain(surf), name="point-light", mesh_options={"resolution": 128},
+        noise=noise, outliers=outliers, seed=seed, false_highlights="surface",
+        closed=False, euler=1,
     )
 
 
@@ -1886,6 +2858,13 @@ SCENES: dict[str, Callable[..., SyntheticScene]] = {
     "ellipsoid-cap": ellipsoid_cap,
     "paraboloid": paraboloid,
     "saddle": saddle,
+    "sphere-around": sphere_around,
+    "ellipsoid-around": ellipsoid_around,
+    "torus": torus,
+    "bottle": bottle,
+    "wrap": wrap,
+    "freeform": freeform,
+    "point-light": point_light,
 }
 
 
@@ -1894,19 +2873,28 @@ def scene_names() -> list[str]:
     return list(SCENES)
 
 
-def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
-               ) -> SyntheticScene:
+def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
+               **options: Any) -> SyntheticScene:
     """A built-in scene by name (see :data:`SCENES`).
 
     Args:
         name: One of :func:`scene_names`.
         noise: Pixel noise standard deviation in pixels.
-        outliers: Fraction of specularities replaced by random pixels.
-        seed: Seed of the noise and outliers (the geometry does not depend on it).
+        outliers: Fraction of specularities replaced by false ones.
+        seed: Seed of the noise and outliers; for the scenes of every shape class
+            (``sphere-around`` to ``point-light``) also of the geometry (sizes, bumps, camera
+            jitter, which points are chosen). The paper's scenes keep a fixed geometry.
+        **options: Options only some scenes take (``freeform``: ``highlights``).
 
     Raises:
-        SceneError: If the name is unknown or the noise settings are out of range.
+        SceneError: If the name is unknown, a scene does not take an option, or the settings
+            are out of range.
     """
     if name not in SCENES:
         raise SceneError(f"scene: unknown name {name!r}, expected one of {scene_names()}")
-    return SCENES[name](noise=noise, outliers=outliers, seed=seed)
+    make = SCENES[name]
+    params = inspect.signature(make).parameters
+    for key in options:
+        if key not in params:
+            raise SceneError(f"{key}: scene {name!r} takes no such option")
+    return make(noise=noise, outliers=outliers, seed=seed, **options)
