@@ -134,7 +134,19 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if len({p.resolve() for p in paths}) < len(paths):
         raise SceneError("--output, --truth and --truth-json must name different files")
 
-    synthetic = make_scene(args.name, noise=args.noise, outliers=args.outliers, seed=args.seed)
+    options = {}
+    if args.highlights is not None:
+        if args.name != "freeform":
+            raise SceneError(f"--highlights: only the 'freeform' scene takes it, not "
+                             f"{args.name!r}")
+        options["highlights"] = args.highlights
+    try:
+        synthetic = make_scene(args.name, noise=args.noise, outliers=args.outliers,
+                               seed=args.seed, **options)
+    except SceneError as exc:
+        if str(exc).startswith("highlights:"):
+            raise SceneError(f"--{exc}") from None
+        raise
     atomic_write(out, lambda tmp: synthetic.to_json(tmp))
     written = [str(out)]
     if truth is not None:
@@ -149,18 +161,27 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         print(f"{args.name}: {len(synthetic.truth_points)} specularities "
               f"({int(synthetic.outlier_mask.sum())} outliers, noise {args.noise:g} px), "
               f"{len(synthetic.cameras)} cameras, {len(synthetic.points)} points, "
-              f"{synthetic.scene_dict['light']['type']} light -> {', '.join(written)}",
+              f"{_light_kind(synthetic.scene_dict)} -> {', '.join(written)}",
               file=sys.stderr)
     return 0
 
 
+def _light_kind(scene_dict: dict) -> str:
+    """``"camera light"``, or ``"per-camera directional lights"`` when each camera has one."""
+    if "light" in scene_dict:
+        return f"{scene_dict['light']['type']} light"
+    kinds = sorted({c["light"]["type"] for c in scene_dict["cameras"] if "light" in c})
+    return f"per-camera {'/'.join(kinds)} lights"
+
+
 def _scene_list() -> str:
-    from .synthetic import SCENES
+    from .synthetic import FREEFORM_HIGHLIGHTS, SCENES
 
     lines = []
     for name, make in SCENES.items():
         doc = (make.__doc__ or "").strip().splitlines()
-        lines.append(f"  {name:<14} {doc[0] if doc else ''}")
+        lines.append(f"  {name:<17} {doc[0] if doc else ''}")
+    lines.append(f"freeform takes --highlights N (default {FREEFORM_HIGHLIGHTS})")
     return "\n".join(lines)
 
 
@@ -279,8 +300,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "synth",
         help="write a built-in synthetic scene with its ground truth",
         description="Write a built-in synthetic scene (scene format version 1) and, optionally, "
-                    "its ground truth. The geometry of each scene is fixed; --seed drives only "
-                    "the pixel noise and the outliers.",
+                    "its ground truth. The paper's scenes (octant to saddle) have a fixed "
+                    "geometry and --seed drives only the pixel noise and the outliers; for the "
+                    "scenes of every shape class (sphere-around to point-light) --seed also "
+                    "varies the shape a little (sizes, bumps, camera jitter, which points).",
         epilog_factory=lambda: "scenes:\n" + _scene_list(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -297,10 +320,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                        help="standard deviation of Gaussian noise added to each highlight's "
                             "pixel, in pixels (default 0)")
     synth.add_argument("--outliers", type=finite, default=0.0, metavar="F",
-                       help="fraction of highlights replaced by a pixel drawn uniformly over "
-                            "the image (default 0)")
+                       help="fraction of highlights replaced by false ones: a pixel drawn "
+                            "uniformly over the image (the paper's scenes) or one on the object "
+                            "whose normal is wrong by 15 degrees or more (the shape-class "
+                            "scenes); the truth JSON lists them (default 0)")
     synth.add_argument("--seed", type=integer, default=0, metavar="S",
-                       help="seed of the noise and the outliers (default 0)")
+                       help="seed of the noise and the outliers, and of the shape for the "
+                            "scenes of every shape class (default 0)")
+    synth.add_argument("--highlights", type=integer, default=None, metavar="N",
+                       help="freeform only: number of highlights (default: the scene's, "
+                            "shown below)")
     synth.add_argument("--quiet", action="store_true", help="print nothing but errors")
     synth.set_defaults(func=_cmd_synth)
 
