@@ -14,14 +14,17 @@ from warpspec.synthetic import (
     Cylinder,
     DirectionalLight,
     Ellipsoid,
+    FreeformHeightField,
     Halfspace,
     Intrinsics,
     MeshSurface,
     Paraboloid,
     Plane,
     PointLight,
+    Revolution,
     Saddle,
     Sphere,
+    Torus,
     clip_mesh,
     find_highlight,
     look_at,
@@ -32,6 +35,10 @@ from warpspec.synthetic import (
     scene_from_points,
     scene_names,
 )
+
+SHAPES = ["sphere-around", "ellipsoid-around", "torus", "bottle", "wrap", "freeform",
+          "point-light"]
+CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "torus": 0}
 
 NAMES = scene_names()
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
@@ -328,7 +335,12 @@ def test_mesh_surface_orients_and_reflects():
 
 def test_analytic_closest_points():
     q = np.random.default_rng(3).normal(size=(400, 3)) * 0.8
-    for surf in (Ellipsoid((0.1, 0.0, 0.0), (1.0, 0.7, 0.5)), Saddle((0.0, 0.0, 0.0), 0.4),
+    for surf in (Torus((0.1, 0, 0), (0.1, 0.2, 1), 1.0, 0.35),
+                 Revolution((0, 0, 0), (0, 0.1, 1), body=0.35, neck=0.12, shoulder=0.3,
+                            width=0.1),
+                 FreeformHeightField(waves=[(0.04, 5.0, 3.0, 0.2)], bumps=[(0.1, 0.1, 0, 0.15)],
+                                     region=(-0.5, 0.5, -0.5, 0.5)),
+                 Ellipsoid((0.1, 0.0, 0.0), (1.0, 0.7, 0.5)), Saddle((0.0, 0.0, 0.0), 0.4),
                  Paraboloid((0.0, 0.0, 0.2), -0.6, -0.4), Sphere((0, 0, 0), 0.7),
                  Cylinder((0, 0, 0), (1, 1, 0), 0.3), Plane((0, 0, 0.1), (1, 2, 3))):
         cp = surf.closest_point(q)
@@ -356,3 +368,176 @@ def test_truth_dict_holds_what_an_evaluation_needs(scenes):
     np.testing.assert_allclose(d["truth_normals"], s.truth_normals)
     np.testing.assert_allclose(d["points"], s.points)
     assert d["outliers"] == [] and d["name"] == "ellipsoid-cap"
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes of every shape class
+# --------------------------------------------------------------------------------------------
+
+
+def test_shape_scenes_are_in_the_catalogue():
+    assert set(SHAPES) <= set(NAMES)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_shape_scene_reflection_law_through_the_scene_file(scenes, name, tmp_path):
+    from warpspec import Scene
+
+    s = scenes[name]
+    path = tmp_path / f"{name}.json"
+    s.to_json(path)
+    loaded = Scene.load(path)
+    assert loaded.num_specularities == len(s.truth_points)
+    origins, dirs = loaded.rays()
+    x = s.truth_points
+    miss = np.linalg.norm(np.cross(x - origins, dirs), axis=1)
+    assert np.all(miss < 1e-9 * np.linalg.norm(x - origins, axis=1))
+    # The normal the reflection law gives at the true point equals the truth's normal there.
+    np.testing.assert_allclose(loaded.normals(points=x), s.surface.normal(x), atol=1e-6, rtol=0)
+    np.testing.assert_allclose(s.surface.implicit(x), 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_shape_scene_truth_topology_and_domain(scenes, name):
+    s = scenes[name]
+    mesh = s.truth_mesh()
+    lo, hi = s.domain
+    if name in CLOSED:
+        assert s.closed and mesh.is_watertight and mesh.volume > 0
+        assert s.euler == CLOSED[name] and mesh.euler_number == CLOSED[name]
+        # The whole object inside the domain with a margin of 10-15% of its size.
+        size = float(np.ptp(mesh.vertices, axis=0).max())
+        margin = np.concatenate([mesh.vertices.min(axis=0) - lo, hi - mesh.vertices.max(axis=0)])
+        assert np.all(margin > 0.10 * size) and np.all(margin < 0.15 * size)
+    else:
+        assert not s.closed and not mesh.is_watertight
+        assert mesh.euler_number == s.euler == (0 if name == "bottle" else 1)
+        assert np.all(mesh.vertices >= lo - 1e-9) and np.all(mesh.vertices <= hi + 1e-9)
+    d = json.loads(json.dumps(s.truth_dict()))
+    assert d["closed"] == (name in CLOSED) and d["euler"] == s.euler
+
+
+def test_bottle_truth_is_open_at_the_domain_ends(scenes):
+    s = scenes["bottle"]
+    mesh = s.truth_mesh()
+    lo, hi = s.domain
+    # Its two boundary loops lie on the domain's bottom and top faces.
+    edges = mesh.edges_sorted
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    z = mesh.vertices[np.unique(uniq[count == 1]), 2]
+    assert np.all(np.isclose(z, lo[2], atol=1e-9) | np.isclose(z, hi[2], atol=1e-9))
+    assert np.any(np.isclose(z, lo[2], atol=1e-9)) and np.any(np.isclose(z, hi[2], atol=1e-9))
+    # Body below, neck above: the radius shrinks by more than half.
+    r = s.surface.radius(np.array([0.0, 0.8]))
+    assert r[1] < 0.5 * r[0]
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_shape_scene_highlights_visible_on_the_truth_mesh(scenes, name):
+    from warpspec.evaluate import ray_mesh_intersect
+
+    s = scenes[name]
+    mesh = s.truth_mesh()
+    c = s.camera_centres[s.camera_indices]
+    hits, faces = ray_mesh_intersect(mesh, c, s.truth_points - c)
+    assert np.all(faces >= 0)
+    # The first hit of the ray to each true point is that point (up to the mesh's facets).
+    assert np.linalg.norm(hits - s.truth_points, axis=1).max() < 5e-3
+    if name in CLOSED:
+        assert len(s.truth_points) >= 20
+        n = s.truth_normals
+        # Spread over the surface: every axis direction has highlights within 60 degrees.
+        for axis in np.concatenate([np.eye(3), -np.eye(3)]):
+            assert (n @ axis).max() > 0.5
+
+
+def test_torus_has_views_through_the_hole_and_several_highlights_per_view(scenes):
+    s = scenes["torus"]
+    axis = s.surface.axis
+    dirs = s.camera_centres - s.surface.centre
+    cosine = dirs @ axis / np.linalg.norm(dirs, axis=1)
+    assert cosine.max() > 0.98 and cosine.min() < -0.98
+    assert np.bincount(s.camera_indices).max() >= 2
+    assert 40 <= len(s.truth_points) <= 80 and len(s.points) == 8
+
+
+def test_torus_ray_intersection_is_exact():
+    t = Torus((0, 0, 0), (0, 0, 1), 1.0, 0.35)
+    hit = t.intersect(np.array([[3.0, 0, 0], [0, 0, 3.0], [0.5, 0.0, 3.0]]),
+                      np.array([[-1.0, 0, 0], [0, 0, -1.0], [0, 0, -1.0]]))
+    np.testing.assert_allclose(hit[:2], [3.0 - 1.35, np.inf])
+    assert np.isinf(hit[2])  # 0.5 from the axis: through the hole (inner radius 0.65)
+    hit = t.intersect(np.array([[1.0, 0, 3.0]]), np.array([[0, 0, -1.0]]))
+    np.testing.assert_allclose(hit, [3.0 - 0.35], rtol=1e-14)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_seed_varies_the_shape(scenes, name):
+    a, b = scenes[name], make_scene(name, seed=1)
+    assert make_scene(name, seed=1).scene_dict == b.scene_dict  # same seed, same scene
+    # The seed-1 surface does not pass through the seed-0 highlights.
+    assert np.abs(b.surface.signed_distance(a.truth_points)).max() > 5e-3
+    assert not np.allclose(a.points, b.points)
+
+
+@pytest.mark.parametrize("name,fraction", [(n, 0.25) for n in SHAPES]
+                         + [("sphere-around", 0.1), ("torus", 0.1)])
+def test_outliers_are_false_highlights_on_the_object(name, fraction):
+    s = make_scene(name, outliers=fraction, seed=2)
+    m = len(s.truth_points)
+    assert s.outlier_mask.sum() == round(fraction * m) > 0
+    assert s.truth_dict()["outliers"] == np.flatnonzero(s.outlier_mask).tolist()
+    scene = s.scene()
+    origins, dirs = scene.rays()
+    lo, hi = s.domain
+    bad = s.outlier_mask
+    t = s.surface.intersect(origins[bad], dirs[bad])
+    assert np.all(np.isfinite(t))
+    x = s.truth_points.copy()
+    x[bad] = origins[bad] + t[:, None] * dirs[bad]
+    assert np.all((x >= lo) & (x <= hi))
+    law = scene.normals(points=x)
+    # Where a false highlight's ray meets the object, the law's normal is wrong by >= 15 deg.
+    cosine = np.einsum("ij,ij->i", law[bad], s.surface.normal(x[bad]))
+    assert np.all(cosine < math.cos(math.radians(15.0)))
+    # The inliers keep the law exactly.
+    np.testing.assert_allclose(law[~bad], s.truth_normals[~bad], atol=1e-6, rtol=0)
+
+
+def test_freeform_honours_highlights():
+    for count in (30, 120):
+        s = make_scene("freeform", highlights=count)
+        assert len(s.truth_points) == len(s.cameras) == count
+        check_reflection_law(s.scene_dict, s.truth_points, s.truth_normals)
+    assert len(make_scene("freeform").truth_points) == 60
+    for bad in (3, 401, 2.5, True, "60"):
+        with pytest.raises(SceneError, match="highlights"):
+            make_scene("freeform", highlights=bad)
+    with pytest.raises(SceneError, match="highlights: scene 'torus' takes no such option"):
+        make_scene("torus", highlights=30)
+
+
+def test_synth_command_writes_every_shape_scene(tmp_path, capsys):
+    from warpspec import Scene
+    from warpspec.cli import main
+
+    for name in ("ellipsoid-around", "bottle"):
+        paths = [tmp_path / f"{name}{ext}" for ext in (".json", ".ply", ".truth.json")]
+        assert main(["synth", name, "-o", str(paths[0]), "--truth", str(paths[1]),
+                     "--truth-json", str(paths[2]), "--seed", "3", "--quiet"]) == 0
+        scene = Scene.load(paths[0])
+        truth = json.loads(paths[2].read_text())
+        assert scene.num_specularities == len(truth["truth_points"])
+        assert truth["closed"] == (name != "bottle") and truth["euler"] == CLOSED.get(name, 0)
+        assert trimesh.load(paths[1]).is_watertight == (name != "bottle")
+    out = tmp_path / "f.json"
+    assert main(["synth", "freeform", "-o", str(out), "--highlights", "30", "--quiet"]) == 0
+    assert Scene.load(out).num_specularities == 30
+    for args, message in ((["freeform", "--highlights", "2"], "--highlights: must be"),
+                          (["torus", "--highlights", "30"], "--highlights: only")):
+        try:
+            code = main(["synth", *args, "-o", str(tmp_path / "x.json")])
+        except SystemExit as exc:
+            code = exc.code
+        assert code == 2 and message in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
