@@ -132,3 +132,39 @@ def crop_to_hull(mesh: trimesh.Trimesh, anchors: np.ndarray) -> trimesh.Trimesh:
     out.update_faces(keep)
     out.remove_unreferenced_vertices()
     return out
+
+
+def supported_components(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray,
+                         *, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the connected pieces of a mesh that come nowhere near the data.
+
+    A smooth fit extrapolates beyond the constraints, and far from them its zero set may close
+    into pieces that no ray or point speaks for (a second sheet of a saddle, a blob in a
+    corner). A piece is kept when one of its vertices lies within ``radius`` of an anchor (a ray
+    intersection or a point constraint); with no anchors the mesh is returned unchanged.
+
+    Returns:
+        The kept vertices (in their order) and faces (renumbered).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    if len(faces) == 0 or len(anchors) == 0:
+        return vertices, faces
+    n = len(vertices)
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, label = connected_components(graph, directed=False)
+    if count == 1:
+        return vertices, faces
+    near, _ = cKDTree(anchors).query(vertices, distance_upper_bound=radius)
+    supported = np.zeros(count, dtype=bool)
+    supported[np.unique(label[np.isfinite(near)])] = True
+    if supported.all() or not supported.any():
+        return vertices, faces
+    keep_vertex = supported[label]
+    new_index = np.cumsum(keep_vertex) - 1
+    keep_face = keep_vertex[faces[:, 0]]
+    return vertices[keep_vertex], new_index[faces[keep_face]]

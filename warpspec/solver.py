@@ -21,6 +21,7 @@ import warp as wp
 from ._runtime import init, resolve_device
 from .errors import ReconstructionError, SceneError
 from .grid import Grid
+from .implicit import ImplicitStart
 from .initial import fit_height_field, plane_frame
 from .kernels.constraints import (
     launch_bend,
@@ -38,7 +39,7 @@ from .kernels.differences import (
 )
 from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_measures
 from .kernels.redistance import Redistancer
-from .mesh import triangulate, write_ply
+from .mesh import supported_components, triangulate, write_ply
 from .scene import Scene
 
 if TYPE_CHECKING:
@@ -47,6 +48,9 @@ if TYPE_CHECKING:
 __all__ = ["Reconstructor", "Result", "reconstruct"]
 
 REINIT_BAND = "gradient"
+STARTS = ("implicit", "height", "paper")
+SUPPORT_RADIUS = 3.0
+"""A connected piece of the mesh is kept when it comes this many voxels from a constraint."""
 FULL_REINIT_EVERY = 5
 
 MEASURE_KEYS = (
@@ -251,6 +255,10 @@ class Reconstructor:
             (plane and bend) unchanged. The flow's normal term is local to the constraints,
             so the shape between them comes from the start.
         fit_degree: Highest total degree of that height field's polynomial.
+        start: The starting surface: ``"implicit"`` (the default: any shape and topology,
+            fitted coarse to fine to the points and normals, false highlights rejected),
+            ``"height"`` (a height field over the paper's plane, refined ``fit_iterations``
+            times) or ``"paper"`` (the paper's plane, bent by ``bulge``).
         margin: Margin around the points when the scene gives no domain, as a fraction of
             the points' longest extent.
         narrow_band: Update only the nodes within this many voxel widths of the zero set
@@ -284,6 +292,7 @@ class Reconstructor:
         init_iterations: int = 0,
         fit_iterations: int = 5,
         fit_degree: int = 4,
+        start: str = "implicit",
         margin: float = 0.2,
         narrow_band: float | None = 4.0,
         graph: bool | None = None,
@@ -305,6 +314,10 @@ class Reconstructor:
         init_iterations = _non_negative_int("init_iterations", init_iterations)
         self.fit_iterations = _non_negative_int("fit_iterations", fit_iterations)
         self.fit_degree = _positive_int("fit_degree", fit_degree)
+        if start not in STARTS:
+            raise SceneError(f"start: must be one of {', '.join(STARTS)}, got {start!r}")
+        self.start = start
+        self.fit_report = None
         margin = _real("margin", margin, low=0.0)
         self.narrow_band = None if narrow_band is None else _real(
             "narrow_band", narrow_band, low=3.0)
@@ -347,6 +360,7 @@ class Reconstructor:
         self._hits = wp.zeros(m, dtype=wp.vec3, device=d)
         self._active = wp.zeros(m, dtype=int, device=d)
         self._normals = wp.zeros(m, dtype=wp.vec3, device=d)
+        self._ray_index = np.arange(m)  # scene index of each ray the flow uses
         self._points = wp.array(scene.points.astype(np.float32).reshape(-1, 3), dtype=wp.vec3,
                                 device=d)
         self._sums = wp.zeros(NUM_SLOTS, dtype=wp.float64, device=d)
@@ -399,6 +413,9 @@ class Reconstructor:
     def _initialise(self, init_iterations: int) -> None:
         h = self.grid.spacing
         point, normal = initial_plane(self.scene, self.grid)
+        if self.start == "implicit":
+            self._implicit_start(point, normal)
+            return
         launch_plane(self.phi, origin=self._origin, spacing=h, point=tuple(point),
                      normal=tuple(normal))
         have_points = self.scene.num_points > 0
@@ -418,9 +435,37 @@ class Reconstructor:
             self.phi, self._tmp = self._tmp, self.phi
             self._redistancer.reinitialize(self.phi)
         self.bent_phi = self.phi.numpy().copy()
-        if self.fit_iterations and self.scene.num_specularities:
+        if self.start == "height" and self.fit_iterations and self.scene.num_specularities:
             self._fit_start(point, normal)
         self.initial_phi = self.phi.numpy().copy()
+
+    def _implicit_start(self, point: np.ndarray, normal: np.ndarray) -> None:
+        """Fit the implicit start (any shape) and keep only the rays it accepts."""
+        fit = ImplicitStart(self.scene, self.grid, self.device, (point, normal),
+                            (self._ray_origin, self._ray_dir, self._light_code, self._light_vec),
+                            self._points)
+        self.fit_report = fit.run(self.phi)
+        self._redistancer.reinitialize(self.phi)
+        self._phi_version += 1
+        self.bent_phi = self.phi.numpy().copy()
+        self.initial_phi = self.bent_phi
+        keep = np.flatnonzero(self.fit_report.weights > 0.0) if self.scene.num_specularities \
+            else np.zeros(0, dtype=int)
+        if len(keep) < self.scene.num_specularities:
+            self._use_rays(keep)
+
+    def _use_rays(self, keep: np.ndarray) -> None:
+        """Restrict the flow to the rays ``keep`` (indices into the scene's specularities)."""
+        d = self.device
+        self._ray_index = keep
+        for name in ("_ray_origin", "_ray_dir", "_light_code", "_light_vec"):
+            arr = getattr(self, name)
+            host = arr.numpy()[keep]
+            setattr(self, name, wp.array(host, dtype=arr.dtype, device=d))
+        m = len(keep)
+        self._hits = wp.zeros(m, dtype=wp.vec3, device=d)
+        self._active = wp.zeros(m, dtype=int, device=d)
+        self._normals = wp.zeros(m, dtype=wp.vec3, device=d)
 
     def _fit_start(self, point: np.ndarray, normal: np.ndarray) -> None:
         """Refine the start with a height field fitted to the points and the normals.
@@ -693,9 +738,15 @@ class Reconstructor:
         """
         phi = self.phi.numpy().copy()
         self._current_hits()
-        hits = self._hits.numpy().astype(np.float64)
-        hits[self._active.numpy() == 0] = np.nan
+        used = self._hits.numpy().astype(np.float64)
+        used[self._active.numpy() == 0] = np.nan
+        hits = np.full((self.scene.num_specularities, 3), np.nan)
+        hits[self._ray_index] = used
         vertices, faces = triangulate(phi, self.grid)
+        anchors = np.vstack([hits[np.all(np.isfinite(hits), axis=1)],
+                             self.scene.points.reshape(-1, 3)])
+        vertices, faces = supported_components(vertices, faces, anchors,
+                                               radius=SUPPORT_RADIUS * self.grid.spacing)
         return Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
                       history=list(self.history), hits=hits)
 

@@ -1,0 +1,457 @@
+"""The implicit start: any shape and topology, chosen from the data, solved coarse to fine.
+
+A smooth function ``f`` on the grid is fitted to the points (``f = 0``) and to the normals the
+reflection law demands where the specular rays meet its current zero set (``grad f = N``), with
+the Hessian energy of Smooth Signed Distance reconstruction as the smoothness; the rays are then
+intersected again and ``f`` refitted, a few rounds on each grid of a coarse-to-fine ladder
+(16, 32, ... up to the requested resolution), each level started from the one below. The depth of
+a highlight is unknown, so no value is asked of ``f`` at a ray's hit: the surface's offset comes
+from the points, its shape from the normals, carried across by the smoothness. Rays that miss
+the current surface pull it, weakly, toward where they pass nearest. Each ray's weight is
+refitted robustly (Tukey's biweight on the angle between ``grad f`` and ``N``), so a highlight
+whose normal cannot be met with the others (a false detection, another light's reflection) is
+rejected and reported instead of bending the surface. See docs/DESIGN.md, section "The start".
+
+The first guess needs no knob: where the cameras stand decides it. When they surround the
+data (no half-space through the rays' convergence point holds them all), a sphere around that
+point through the points; otherwise the paper's plane through the points, facing the cameras.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from . import quadric as Q
+from .grid import Grid
+from .initial import plane_frame
+from .kernels import implicit as K
+
+__all__ = ["FitReport", "ImplicitStart", "first_guess", "level_ladder", "ray_convergence"]
+
+COARSEST = 16
+"""Cells along the longest side of the coarsest level of the ladder."""
+QUADRIC_DEG = 3.0
+"""The quadric alone is the start when 90% of the accepted normals are met this closely..."""
+QUADRIC_POINT_VOXELS = 0.25
+"""...and every point lies within this many voxel widths of it."""
+LIMIT_DEG = (30.0, 30.0, 30.0)
+"""Smallest Tukey limit of the robust weights on the levels of the ladder (then the last):
+a coarse grid cannot follow every legitimate normal, a fine one can."""
+ROUNDS_COARSE = 4
+"""Intersect-and-refit rounds on each coarse level."""
+ROUNDS_FINE = 2
+"""Intersect-and-refit rounds on the requested grid."""
+CG_ITERATIONS = 200
+"""Conjugate-gradient iterations of one fit on a coarse level, at most."""
+CG_ITERATIONS_FINE = 50
+"""Conjugate-gradient iterations of one fit on the requested grid, at most."""
+CG_TOLERANCE = 1e-5
+"""Stop a fit when the residual norm has fallen by this factor."""
+SMOOTHNESS = 0.002
+"""Weight of the Hessian energy per unit of the domain's length (``lam = SMOOTHNESS h / L``)."""
+POINT_WEIGHT = 20.0
+"""Weight of ``(f(y) / h)^2`` at a point constraint, against 1 for a unit normal error."""
+MISS_WEIGHT = 0.5
+"""Weight of ``(f(a) / h)^2`` at the nearest approach ``a`` of a ray that misses."""
+PROXIMITY = 1e-5
+"""Weight of ``((f - f_prev) / h)^2`` per node: fixes the null space, moves nothing."""
+SAMPLE_OFFSETS = (-0.5, 0.0, 0.5)
+"""Gradient samples along each ray around its anchor, in voxel widths of the level."""
+SAMPLE_WEIGHTS = (0.5, 1.0, 0.5)
+
+
+def level_ladder(resolution: int) -> list[int]:
+    """Resolutions of the coarse-to-fine ladder: 16, 32, ... below ``resolution``, then it."""
+    levels = []
+    r = COARSEST
+    while r < resolution:
+        levels.append(r)
+        r *= 2
+    levels.append(resolution)
+    return levels
+
+
+def ray_convergence(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray | None:
+    """Least-squares point nearest to all rays (robust: rays far from it are down-weighted).
+
+    Returns ``None`` when the rays are (nearly) parallel.
+    """
+    if len(origins) < 2:
+        return None
+    w = np.ones(len(origins))
+    x = None
+    for _ in range(5):
+        proj = np.eye(3)[None] - dirs[:, :, None] * dirs[:, None, :]
+        A = np.einsum("i,ijk->jk", w, proj)
+        b = np.einsum("i,ijk,ik->j", w, proj, origins)
+        if np.linalg.cond(A) > 1e8:
+            return x
+        x = np.linalg.solve(A, b)
+        d = np.linalg.norm(np.einsum("ijk,ik->ij", proj, x[None] - origins), axis=1)
+        s = max(1.4826 * float(np.median(d)), 1e-12)
+        w = 1.0 / (1.0 + (d / (2.0 * s)) ** 2)
+    return x
+
+
+@dataclass
+class Guess:
+    """A first guess: a sphere (closed) or a plane (open), in world units."""
+
+    kind: str
+    centre: np.ndarray
+    radius: float = 0.0
+    normal: np.ndarray | None = None
+
+
+def first_guess(scene, grid: Grid, plane: tuple[np.ndarray, np.ndarray]) -> Guess:
+    """Choose the first guess from where the cameras stand.
+
+    Args:
+        scene: The scene.
+        grid: The grid to solve on.
+        plane: The paper's plane ``(point, normal)`` for the open case.
+    """
+    origins, dirs = scene.rays()
+    centres = scene.camera_centres()
+    used = np.unique(scene.spec_camera) if scene.num_specularities else np.arange(len(centres))
+    lo, hi = grid.origin, grid.upper
+    c = ray_convergence(origins, dirs) if len(origins) >= 2 else None
+    if c is None or not np.all((c > lo) & (c < hi)):
+        c = scene.points.mean(axis=0) if scene.num_points else 0.5 * (lo + hi)
+    u = centres[used] - c
+    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    m = u.sum(axis=0)
+    surrounded = True
+    if np.linalg.norm(m) > 1e-9:
+        m = m / np.linalg.norm(m)
+        surrounded = bool(np.min(u @ m) < 0.0)
+    if not surrounded:
+        return Guess("plane", np.asarray(plane[0], float), normal=np.asarray(plane[1], float))
+    room = float(np.min(np.minimum(c - lo, hi - c)))
+    if scene.num_points:
+        radius = float(np.median(np.linalg.norm(scene.points - c, axis=1)))
+    else:
+        radius = 0.5 * room
+    radius = min(max(radius, 2.0 * grid.spacing), max(room - grid.spacing, 2.0 * grid.spacing))
+    return Guess("sphere", c, radius=radius)
+
+
+@dataclass
+class FitReport:
+    """What the implicit start did.
+
+    Attributes:
+        levels: Resolution of each level of the ladder.
+        rounds: Fit rounds run on each level.
+        weights: Final robust weight of each ray, ``(M,)`` (0: rejected).
+        residual_deg: Final angle between each ray's normal and ``grad f`` at its anchor.
+        rejected: Indices of the rays rejected as inconsistent with the others.
+        guess: The first guess's kind (``"sphere"`` or ``"plane"``).
+        cg_iterations: Conjugate-gradient iterations of each fit.
+    """
+
+    levels: list[int]
+    rounds: list[int]
+    weights: np.ndarray
+    residual_deg: np.ndarray
+    rejected: np.ndarray
+    guess: str
+    cg_iterations: list[int] = field(default_factory=list)
+
+
+class _Level:
+    """The device arrays of one level of the ladder and its fit."""
+
+    def __init__(self, grid: Grid, device) -> None:
+        self.grid = grid
+        self.device = device
+        shape = grid.shape
+        self.count = grid.size
+        self.origin = wp.vec3(*(float(v) for v in grid.origin))
+        self.h = float(grid.spacing)
+        d = device
+        self.f = wp.zeros(shape, dtype=float, device=d)
+        self.prev = wp.zeros(shape, dtype=float, device=d)
+        self.rhs = wp.zeros(shape, dtype=float, device=d)
+        self.diag = wp.zeros(shape, dtype=float, device=d)
+        self.ap = wp.zeros(shape, dtype=float, device=d)
+        self.r = wp.zeros(shape, dtype=float, device=d)
+        self.p = wp.zeros(shape, dtype=float, device=d)
+        self.inv_diag = wp.zeros(shape, dtype=float, device=d)
+        self.second = wp.zeros(shape, dtype=wp.vec3, device=d)
+        self.mixed = wp.zeros(shape, dtype=wp.vec3, device=d)
+        self.scalars = wp.zeros(4, dtype=wp.float64, device=d)
+        extent = float(np.max(grid.upper - grid.origin))
+        # (second difference / h)^2 and ((f - prev) / h)^2 are free of units
+        self.lam = SMOOTHNESS * (self.h / extent) / self.h**2
+        self.eps = PROXIMITY / self.h**2
+        self.prior_term = wp.zeros(shape, dtype=float, device=d)
+
+    def flat(self, a: wp.array) -> wp.array:
+        return a.reshape((self.count,))
+
+    def apply(self, x: wp.array, out: wp.array, grads, values) -> None:
+        """``out = A x``."""
+        d = self.device
+        wp.launch(K.hessian_terms, dim=self.grid.shape, inputs=[x],
+                  outputs=[self.second, self.mixed], device=d)
+        wp.launch(K.hessian_adjoint, dim=self.grid.shape,
+                  inputs=[self.second, self.mixed, x, self.lam, self.eps],
+                  outputs=[out], device=d)
+        xs, ws = grads
+        if xs.shape[0]:
+            wp.launch(K.gradient_apply, dim=xs.shape[0], inputs=[x, self.origin, self.h, xs, ws],
+                      outputs=[out], device=d)
+        ys, vw = values
+        if ys.shape[0]:
+            wp.launch(K.value_apply, dim=ys.shape[0], inputs=[x, self.origin, self.h, ys, vw],
+                      outputs=[out], device=d)
+
+    def set_prior(self, prior: wp.array) -> None:
+        """Make the smoothness act on ``f - prior``: store ``lam D^T W D prior``."""
+        d = self.device
+        self.prior_term = wp.zeros(self.grid.shape, dtype=float, device=d)
+        wp.launch(K.hessian_terms, dim=self.grid.shape, inputs=[prior],
+                  outputs=[self.second, self.mixed], device=d)
+        wp.launch(K.hessian_adjoint, dim=self.grid.shape,
+                  inputs=[self.second, self.mixed, prior, self.lam, 0.0],
+                  outputs=[self.prior_term], device=d)
+
+    def solve(self, grads, normals, values, iterations: int) -> int:
+        """Fit ``f`` (started from its current values) to the samples; CG iterations run."""
+        d = self.device
+        shape = self.grid.shape
+        wp.copy(self.prev, self.f)
+        # rhs and diagonal: proximity + smoothness (about the prior), then the data terms
+        wp.launch(K.proximity_rhs, dim=shape, inputs=[self.prev, self.eps, self.prior_term],
+                  outputs=[self.rhs], device=d)
+        wp.launch(K.hessian_diagonal, dim=shape,
+                  inputs=[wp.vec3i(*shape), self.lam, self.eps], outputs=[self.diag], device=d)
+        xs, ws = grads
+        if xs.shape[0]:
+            wp.launch(K.gradient_rhs, dim=xs.shape[0],
+                      inputs=[self.f, self.origin, self.h, xs, ws, normals],
+                      outputs=[self.rhs, self.diag], device=d)
+        ys, vw = values
+        if ys.shape[0]:
+            wp.launch(K.value_diagonal, dim=ys.shape[0],
+                      inputs=[self.f, self.origin, self.h, ys, vw], outputs=[self.diag], device=d)
+        n = self.count
+        chunks = (n + K.REDUCE_CHUNK - 1) // K.REDUCE_CHUNK
+        wp.launch(K.invert, dim=n, inputs=[self.flat(self.diag), n],
+                  outputs=[self.flat(self.inv_diag)], device=d)
+        self.apply(self.f, self.ap, grads, values)
+        self.scalars.zero_()
+        wp.launch(K.cg_start, dim=chunks,
+                  inputs=[self.flat(self.rhs), self.flat(self.ap), self.flat(self.inv_diag), n],
+                  outputs=[self.flat(self.r), self.flat(self.p), self.scalars], device=d)
+        rr0 = float(self.scalars.numpy()[K.CG_SLOTS["rr"]])
+        if not rr0 > 0.0:
+            return 0
+        done = 0
+        for it in range(1, iterations + 1):
+            wp.launch(K.cg_clear, dim=1, inputs=[self.scalars], device=d)
+            self.apply(self.p, self.ap, grads, values)
+            wp.launch(K.cg_dot, dim=chunks, inputs=[self.flat(self.p), self.flat(self.ap), n],
+                      outputs=[self.scalars], device=d)
+            wp.launch(K.cg_step, dim=chunks,
+                      inputs=[self.flat(self.p), self.flat(self.ap), self.flat(self.inv_diag), n,
+                              self.scalars],
+                      outputs=[self.flat(self.f), self.flat(self.r)], device=d)
+            wp.launch(K.cg_direction, dim=n,
+                      inputs=[self.flat(self.r), self.flat(self.inv_diag), n, self.scalars],
+                      outputs=[self.flat(self.p)], device=d)
+            wp.launch(K.cg_shift, dim=1, inputs=[self.scalars], device=d)
+            done = it
+            if it % 10 == 0:
+                rr = float(self.scalars.numpy()[K.CG_SLOTS["rr"]])
+                if rr <= (CG_TOLERANCE**2) * rr0:
+                    break
+        return done
+
+
+class ImplicitStart:
+    """Fit the implicit start coarse to fine and hand back the level set on the final grid.
+
+    Args:
+        scene: The scene.
+        grid: The requested grid.
+        device: The Warp device.
+        plane: The paper's plane ``(point, normal)`` (the first guess for one-sided views).
+        rays: Device arrays ``(origins, dirs, light codes, light vectors)`` of the rays.
+        points: Device array of the point constraints.
+    """
+
+    def __init__(self, scene, grid: Grid, device, plane, rays, points: wp.array) -> None:
+        self.scene = scene
+        self.grid = grid
+        self.device = device
+        self.plane = plane
+        self.ray_origin, self.ray_dir, self.light_code, self.light_vec = rays
+        self.points = points
+        m = self.ray_origin.shape[0]
+        self.m = m
+        self.anchor = wp.zeros(m, dtype=wp.vec3, device=device)
+        self.kind = wp.zeros(m, dtype=int, device=device)
+        self.normals = wp.zeros(m, dtype=wp.vec3, device=device)
+        self.grad = wp.zeros(m, dtype=wp.vec3, device=device)
+        self.value = wp.zeros(m, dtype=float, device=device)
+        self.weights = np.ones(m)
+        self.residual = np.zeros(m)
+
+    def run(self, out: wp.array) -> FitReport:
+        """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
+        guess = first_guess(self.scene, self.grid, self.plane)
+        lo, hi = self.grid.origin, self.grid.upper
+        frame = 0.5 * (lo + hi)
+        scale = 0.5 * float(np.max(hi - lo))
+        if guess.kind == "sphere":
+            initial = Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
+        else:
+            initial = Q.plane(guess.centre, guess.normal, frame_centre=frame, scale=scale)
+        quad, self.weights, self.residual = Q.fit_quadric(
+            self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing)
+        self.quadric = quad
+        rounds, cg = [], []
+        ladder: list[int] = []
+        if self._quadric_suffices():
+            self._quadric_field(self.grid, out)
+        else:
+            if guess.kind == "plane":
+                # seen from one side: the prior is a quadratic height field over the plane,
+                # which has one sheet (a general quadric may close a second one in the domain)
+                self.quadric, self.weights, self.residual = Q.fit_quadric(
+                    self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
+                    frame=plane_frame(guess.normal))
+            ladder = level_ladder(max(self.grid.shape) - 1)
+            previous: _Level | None = None
+            for index, res in enumerate(ladder):
+                last = index == len(ladder) - 1
+                grid = self.grid if last else Grid.from_bounds(lo, hi, resolution=res)
+                level = _Level(grid, self.device)
+                self._quadric_field(grid, level.p)  # the prior, in a scratch field
+                level.set_prior(level.p)
+                if previous is None:
+                    wp.copy(level.f, level.p)
+                else:
+                    wp.launch(K.resample, dim=grid.shape,
+                              inputs=[previous.f, previous.origin, previous.h, level.origin,
+                                      level.h], outputs=[level.f], device=self.device)
+                self.limit_deg = LIMIT_DEG[min(index, len(LIMIT_DEG) - 1)]
+                n_rounds = ROUNDS_FINE if last else ROUNDS_COARSE
+                for _ in range(n_rounds):
+                    cg.append(self._round(level, CG_ITERATIONS_FINE if last else CG_ITERATIONS))
+                rounds.append(n_rounds)
+                previous = level
+            self._anchor(previous)
+            self._update_weights(previous)
+            wp.copy(out, previous.f)
+        self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
+        rejected = np.flatnonzero(self.weights == 0.0)
+        return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
+                         residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
+                         cg_iterations=cg)
+
+    def _quadric_suffices(self) -> bool:
+        """Whether the quadric meets every accepted normal and point to within noise."""
+        live = self.weights > 0.0
+        if not live.any():
+            return False
+        within = float(np.percentile(self.residual[live], 90)) <= QUADRIC_DEG
+        pts = self.scene.points.reshape(-1, 3)
+        if len(pts):
+            g = np.linalg.norm(self.quadric.gradient(pts), axis=1)
+            dist = np.abs(self.quadric.value(pts)) / np.maximum(g, 1e-300)
+            within &= float(dist.max()) * self.quadric.scale <= QUADRIC_POINT_VOXELS * \
+                self.grid.spacing
+        return bool(within)
+
+    def _quadric_field(self, grid: Grid, out: wp.array) -> None:
+        q = self.quadric
+        wp.launch(K.quadric_field, dim=grid.shape,
+                  inputs=[wp.vec3(*(float(v) for v in grid.origin)), float(grid.spacing),
+                          wp.vec3(*(float(v) for v in q.centre)), float(q.scale),
+                          wp.array(q.coeffs.astype(np.float32), dtype=float,
+                                   device=self.device)],
+                  outputs=[out], device=self.device)
+
+    def _anchor(self, level: _Level) -> None:
+        if self.m == 0:
+            return
+        wp.launch(K.ray_anchor, dim=self.m,
+                  inputs=[level.f, level.origin, level.h, self.ray_origin, self.ray_dir,
+                          self.light_code, self.light_vec],
+                  outputs=[self.anchor, self.kind, self.normals], device=self.device)
+
+    def _update_weights(self, level: _Level) -> None:
+        """Robust weights from the angle between each ray's normal and ``grad f`` there."""
+        if self.m == 0:
+            return
+        wp.launch(K.sample_gradient, dim=self.m,
+                  inputs=[level.f, level.origin, level.h, self.anchor], outputs=[self.grad],
+                  device=self.device)
+        g = self.grad.numpy().astype(np.float64)
+        n = self.normals.numpy().astype(np.float64)
+        kind = self.kind.numpy()
+        cos = np.einsum("ij,ij->i", g, n) / np.maximum(np.linalg.norm(g, axis=1), 1e-12)
+        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        live = kind != K.ANCHOR_NONE
+        angle[~live] = 180.0
+        self.residual = angle
+        self.weights = Q.robust_weights(angle, live, limit_deg=self.limit_deg)
+
+    def _round(self, level: _Level, iterations: int) -> int:
+        """Intersect, reweigh, build the samples, fit; returns the CG iterations."""
+        self._anchor(level)
+        self._update_weights(level)
+        grads, normals, values = self._samples(level)
+        return level.solve(grads, normals, values, iterations)
+
+    def _samples(self, level: _Level):
+        d = self.device
+        h = level.h
+        anchors = self.anchor.numpy().astype(np.float64)
+        kind = self.kind.numpy()
+        normals = self.normals.numpy().astype(np.float64)
+        dirs = self.ray_dir.numpy().astype(np.float64)
+        live = (kind != K.ANCHOR_NONE) & (self.weights > 0.0)
+        xs, ws, ns = [], [], []
+        for off, sw in zip(SAMPLE_OFFSETS, SAMPLE_WEIGHTS, strict=True):
+            xs.append(anchors[live] + off * h * dirs[live])
+            ws.append(sw * self.weights[live])
+            ns.append(normals[live])
+        xs = np.concatenate(xs) if xs else np.zeros((0, 3))
+        ws = np.concatenate(ws) if ws else np.zeros(0)
+        ns = np.concatenate(ns) if ns else np.zeros((0, 3))
+        inside = np.all((xs >= level.grid.origin) & (xs <= level.grid.upper), axis=1)
+        xs, ws, ns = xs[inside], ws[inside], ns[inside]
+        # values: the points (f = 0) and, weakly, the nearest approach of missing rays
+        pts = self.scene.points.reshape(-1, 3)
+        miss = live & (kind == K.ANCHOR_NEAREST)
+        ys = np.concatenate([pts, anchors[miss]])
+        vw = np.concatenate([np.full(len(pts), POINT_WEIGHT / h**2),
+                             MISS_WEIGHT * self.weights[miss] / h**2])
+        ok = np.all((ys >= level.grid.origin) & (ys <= level.grid.upper), axis=1)
+        ys, vw = ys[ok], vw[ok]
+        f32 = np.float32
+        grads = (wp.array(xs.astype(f32), dtype=wp.vec3, device=d),
+                 wp.array(ws.astype(f32), dtype=float, device=d))
+        nrm = wp.array(ns.astype(f32), dtype=wp.vec3, device=d)
+        values = (wp.array(ys.astype(f32), dtype=wp.vec3, device=d),
+                  wp.array(vw.astype(f32), dtype=float, device=d))
+        return grads, nrm, values
+
+
+def rejected_summary(report: FitReport, scene) -> list[dict]:
+    """One dict per rejected ray: index, camera, pixel, residual angle in degrees."""
+    rows = []
+    for i in report.rejected.tolist():
+        rows.append({"index": int(i), "camera": int(scene.spec_camera[i]),
+                     "pixel": [float(v) for v in scene.spec_pixel[i]],
+                     "residual_deg": float(report.residual_deg[i])
+                     if math.isfinite(report.residual_deg[i]) else None})
+    return rows

@@ -1,0 +1,291 @@
+"""A quadric fitted to the points and to the normals where the rays meet it.
+
+The first stage of the implicit start (see :mod:`warpspec.implicit`): ten coefficients, so the
+fit is small linear algebra on the host, and a ray meets a quadric where a quadratic in its
+parameter vanishes, so the intersections are exact. Spheres, ellipsoids, cylinders, planes and
+paraboloids are quadrics: on such shapes the fit alone is the answer, and on others it is the
+shape that the grid fit corrects. The rays' depths are unknown, so the fit alternates: intersect
+the rays with the current quadric, fit the quadric whose gradient is parallel to each ray's
+normal at its intersection and which vanishes at the points, and again. Rays that miss are
+anchored where the quadric comes nearest along them. Every ray's weight is refitted robustly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Quadric", "fit_quadric"]
+
+ROUNDS = 25
+"""Intersect-and-refit rounds."""
+POINT_WEIGHT = 30.0
+"""Weight of ``q(y)^2 / |grad q(y)|^2`` at a point (per voxel width), against a unit normal
+error."""
+MISS_WEIGHT = 0.3
+"""Relative weight of a ray that misses the current quadric."""
+LIMIT_DEG = 30.0
+"""Smallest Tukey limit of the quadric's robust weights: a quadric only approximates most
+shapes, so only normals this far from it can be rejected at this stage."""
+RIDGE = 1e-6
+"""Ridge on the coefficients (normalised coordinates): keeps the system regular."""
+
+
+@dataclass
+class Quadric:
+    """``q(x) = x^T A x + b.x + c`` in coordinates ``x = (world - centre) / scale``.
+
+    Attributes:
+        coeffs: ``(A00, A11, A22, A01, A02, A12, b0, b1, b2, c)``.
+        centre: World centre of the normalised frame.
+        scale: World length of one normalised unit.
+    """
+
+    coeffs: np.ndarray
+    centre: np.ndarray
+    scale: float
+
+    def matrix(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(A, b, c)``."""
+        a = self.coeffs
+        A = np.array([[a[0], a[3], a[4]], [a[3], a[1], a[5]], [a[4], a[5], a[2]]])
+        return A, a[6:9].copy(), float(a[9])
+
+    def value(self, world: np.ndarray) -> np.ndarray:
+        """``q`` at world points."""
+        A, b, c = self.matrix()
+        x = (np.asarray(world, dtype=np.float64) - self.centre) / self.scale
+        return np.einsum("ij,jk,ik->i", x, A, x) + x @ b + c
+
+    def gradient(self, world: np.ndarray) -> np.ndarray:
+        """``grad q`` (with respect to the normalised coordinates) at world points."""
+        A, b, _ = self.matrix()
+        x = (np.asarray(world, dtype=np.float64) - self.centre) / self.scale
+        return 2.0 * x @ A + b
+
+    def intersect(self, origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """First entry of each ray into ``q <= 0`` inside the box, or its nearest approach.
+
+        Returns:
+            Anchors ``(M, 3)``, whether each is a crossing ``(M,)``, and whether the ray enters
+            the box at all ``(M,)``.
+        """
+        A, b, c = self.matrix()
+        o = (origins - self.centre) / self.scale
+        d = dirs
+        t0, t1 = _slab(o, d, (lo - self.centre) / self.scale, (hi - self.centre) / self.scale)
+        inside_box = t0 <= t1
+        qa = np.einsum("ij,jk,ik->i", d, A, d)
+        qb = 2.0 * np.einsum("ij,jk,ik->i", d, A, o) + d @ b
+        qc = np.einsum("ij,jk,ik->i", o, A, o) + o @ b + c
+        t = np.full(len(o), np.nan)
+        crossing = np.zeros(len(o), dtype=bool)
+        with np.errstate(all="ignore"):
+            disc = qb * qb - 4.0 * qa * qc
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            linear = np.abs(qa) < 1e-12 * (np.abs(qb) + np.abs(qc) + 1e-300)
+            r_lin = -qc / qb
+            r1 = np.where(linear, r_lin, (-qb - sq) / (2.0 * qa))
+            r2 = np.where(linear, r_lin, (-qb + sq) / (2.0 * qa))
+            lo_r, hi_r = np.minimum(r1, r2), np.maximum(r1, r2)
+            for r in (lo_r, hi_r):
+                # an entry: q goes from + to - as t grows (derivative negative)
+                deriv = 2.0 * qa * r + qb
+                ok = (~crossing & inside_box & (disc >= 0) & np.isfinite(r) & (r >= t0)
+                      & (r <= t1) & (deriv < 0))
+                t = np.where(ok, r, t)
+                crossing |= ok
+            # misses: where |q| / |grad q| along the ray is smallest (sampled)
+            miss = inside_box & ~crossing
+            if miss.any():
+                s = np.linspace(0.0, 1.0, 129)
+                tt = t0[miss, None] + (t1[miss] - t0[miss])[:, None] * s[None]
+                x = o[miss, None, :] + tt[..., None] * d[miss, None, :]
+                qv = np.einsum("mkj,jl,mkl->mk", x, A, x) + x @ b + c
+                gv = np.linalg.norm(2.0 * x @ A + b, axis=-1)
+                dist = np.abs(qv) / np.maximum(gv, 1e-12)
+                t[miss] = tt[np.arange(len(tt)), np.argmin(dist, axis=1)]
+        anchors = self.centre + self.scale * (o + np.nan_to_num(t)[:, None] * d)
+        return anchors, crossing, inside_box
+
+    def is_closed_in(self, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """Whether ``q > 0`` on all eight corners of the box (a surface that closes inside)."""
+        corners = np.array([[lo[0] if i & 1 == 0 else hi[0], lo[1] if i & 2 == 0 else hi[1],
+                             lo[2] if i & 4 == 0 else hi[2]] for i in range(8)])
+        return bool(np.all(self.value(corners) > 0))
+
+
+def _slab(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    with np.errstate(all="ignore"):
+        inv = 1.0 / np.where(np.abs(d) < 1e-15, 1e-15, d)
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    t0 = np.maximum(np.max(np.minimum(ta, tb), axis=1), 0.0)
+    t1 = np.min(np.maximum(ta, tb), axis=1)
+    return t0, t1
+
+
+def _value_rows(x: np.ndarray) -> np.ndarray:
+    return np.column_stack([x[:, 0] ** 2, x[:, 1] ** 2, x[:, 2] ** 2, 2 * x[:, 0] * x[:, 1],
+                            2 * x[:, 0] * x[:, 2], 2 * x[:, 1] * x[:, 2], x[:, 0], x[:, 1],
+                            x[:, 2], np.ones(len(x))])
+
+
+def _gradient_rows(x: np.ndarray) -> np.ndarray:
+    """``(n, 3, 10)``: the Jacobian of ``grad q`` with respect to the coefficients."""
+    n = len(x)
+    J = np.zeros((n, 3, 10))
+    J[:, 0, 0] = 2 * x[:, 0]
+    J[:, 1, 1] = 2 * x[:, 1]
+    J[:, 2, 2] = 2 * x[:, 2]
+    J[:, 0, 3] = 2 * x[:, 1]
+    J[:, 1, 3] = 2 * x[:, 0]
+    J[:, 0, 4] = 2 * x[:, 2]
+    J[:, 2, 4] = 2 * x[:, 0]
+    J[:, 1, 5] = 2 * x[:, 2]
+    J[:, 2, 5] = 2 * x[:, 1]
+    J[:, 0, 6] = 1
+    J[:, 1, 7] = 1
+    J[:, 2, 8] = 1
+    return J
+
+
+def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(n, u)
+
+
+def height_map(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear map ``coeffs = T theta + c0`` of the quadratic height fields over a plane.
+
+    ``q = w - (a u^2 + b uv + c v^2 + d u + e v + f)`` with ``(u, v, w) = frame @ x`` (rows: two
+    unit axes of the plane and its normal, in normalised coordinates): one sheet, never two,
+    which is what a surface seen from one side is.
+    """
+    u, v, n = frame
+    T = np.zeros((10, 6))
+    for col, (p, q) in enumerate(((u, u), (u, v), (v, v))):
+        M = -0.5 * (np.outer(p, q) + np.outer(q, p))  # the symmetric matrix of -(p.x)(q.x)
+        T[:, col] = [M[0, 0], M[1, 1], M[2, 2], M[0, 1], M[0, 2], M[1, 2], 0, 0, 0, 0]
+    T[6:9, 3] = -u
+    T[6:9, 4] = -v
+    T[9, 5] = -1.0
+    c0 = np.zeros(10)
+    c0[6:9] = n
+    return T, c0
+
+
+def solve_quadric(points: np.ndarray, anchors: np.ndarray, normals: np.ndarray,
+                  weights: np.ndarray, *, centre: np.ndarray, scale: float, voxel: float,
+                  space: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """One weighted least-squares fit of the coefficients (normalised coordinates).
+
+    Gradients must be parallel to the normals (two tangential equations per ray); one equation
+    sets the scale (the mean of ``N . grad q`` over the rays is 1); points must lie on ``q = 0``
+    to within a voxel (``point_weight`` per squared voxel of first-order distance).
+    """
+    rows, rhs = [], []
+    x = (anchors - centre) / scale
+    J = _gradient_rows(x)
+    u, v = _tangents(normals)
+    sw = np.sqrt(weights)[:, None]
+    rows += [sw * np.einsum("ij,ijk->ik", u, J), sw * np.einsum("ij,ijk->ik", v, J)]
+    rhs += [np.zeros(len(x)), np.zeros(len(x))]
+    total = max(float(weights.sum()), 1e-12)
+    if space is None:
+        norm_row = np.einsum("i,ij,ijk->k", weights, normals, J) / total
+        big = np.sqrt(max(total, 1.0)) * 10.0
+        rows.append(big * norm_row[None])
+        rhs.append(np.array([big]))
+    if len(points):
+        y = (points - centre) / scale
+        # q(y) / |grad q| is the first-order distance; |grad q| ~ 1 after the scale row
+        pw = np.sqrt(POINT_WEIGHT) * scale / voxel
+        rows.append(pw * _value_rows(y))
+        rhs.append(np.zeros(len(y)))
+    M = np.vstack(rows)
+    b = np.concatenate(rhs)
+    if space is not None:
+        # a height field: q = c0 + T theta, the scale fixed by the unit normal coefficient
+        T, c0 = space
+        b = b - M @ c0
+        M = M @ T
+    k = M.shape[1]
+    M = np.vstack([M, np.sqrt(RIDGE) * np.eye(k)])
+    b = np.concatenate([b, np.zeros(k)])
+    theta, *_ = np.linalg.lstsq(M, b, rcond=None)
+    return theta if space is None else c0 + T @ theta
+
+
+def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
+                robust_from: int = 3, frame: np.ndarray | None = None
+                ) -> tuple[Quadric, np.ndarray, np.ndarray]:
+    """Alternate intersection and fit from ``initial``.
+
+    With ``frame`` (rows: the plane's two axes and its normal) the quadric is restricted to the
+    quadratic height fields over that plane (:func:`height_map`).
+
+    Returns:
+        The quadric, each ray's robust weight ``(M,)`` and residual angle in degrees ``(M,)``.
+    """
+    origins, dirs = scene.rays()
+    m = len(origins)
+    quad = initial
+    weights = np.ones(m)
+    angle = np.zeros(m)
+    for round_ in range(ROUNDS):
+        anchors, crossing, inside = quad.intersect(origins, dirs, lo, hi)
+        normals = scene.normals(anchors) if m else np.zeros((0, 3))
+        g = quad.gradient(anchors)
+        cos = np.einsum("ij,ij->i", g, normals) / np.maximum(np.linalg.norm(g, axis=1), 1e-300)
+        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        angle[~inside] = 180.0
+        if round_ >= robust_from:
+            weights = robust_weights(angle, inside, limit_deg=LIMIT_DEG)
+        else:
+            weights = inside.astype(float)
+        w = weights * np.where(crossing, 1.0, MISS_WEIGHT)
+        coeffs = solve_quadric(scene.points.reshape(-1, 3), anchors[inside], normals[inside],
+                               w[inside], centre=quad.centre, scale=quad.scale, voxel=voxel,
+                               space=None if frame is None else height_map(frame))
+        quad = Quadric(coeffs, quad.centre, quad.scale)
+    return quad, weights, angle
+
+
+def robust_weights(angle: np.ndarray, live: np.ndarray, *, limit_deg: float,
+                   tukey: float = 4.685) -> np.ndarray:
+    """Tukey's biweight of the residual angles; 0 where not live.
+
+    The limit (weight 0 beyond) is ``tukey`` robust standard deviations of the live residuals
+    (``1.4826`` times their median), but never below ``limit_deg``: a model that cannot follow
+    every legitimate normal (a quadric on a free-form shape, a coarse grid) must not reject
+    them.
+    """
+    if not live.any():
+        return np.zeros(len(angle))
+    sigma = 1.4826 * float(np.median(angle[live]))
+    limit = max(tukey * sigma, limit_deg)
+    w = np.where(angle < limit, (1.0 - (angle / limit) ** 2) ** 2, 0.0)
+    w[~live] = 0.0
+    return w
+
+
+def sphere(centre: np.ndarray, radius: float, *, frame_centre: np.ndarray, scale: float
+           ) -> Quadric:
+    """The sphere as a quadric in the given normalised frame."""
+    c = (np.asarray(centre, float) - frame_centre) / scale
+    r = radius / scale
+    return Quadric(np.array([1, 1, 1, 0, 0, 0, *(-2 * c), c @ c - r * r]) / (2 * r),
+                   frame_centre, scale)
+
+
+def plane(point: np.ndarray, normal: np.ndarray, *, frame_centre: np.ndarray, scale: float
+          ) -> Quadric:
+    """The plane as a quadric in the given normalised frame."""
+    p = (np.asarray(point, float) - frame_centre) / scale
+    n = np.asarray(normal, float)
+    return Quadric(np.array([0, 0, 0, 0, 0, 0, *n, -n @ p]), frame_centre, scale)
