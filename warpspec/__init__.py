@@ -6,7 +6,7 @@ obey the law of reflection.
 """
 
 from .colmap import load_colmap
-from .errors import ReconstructionError, SceneError
+from .errors import InputError, ReconstructionError, SceneError
 from .grid import Grid
 from .redistance import point_distance, redistance
 from .scene import Light, Scene, SceneWarning
@@ -16,6 +16,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Grid",
+    "InputError",
     "Light",
     "ReconstructionError",
     "Reconstructor",

@@ -49,6 +49,9 @@ LIGHT_CAMERA = 2
 _LIGHT_CODES = {"directional": LIGHT_DIRECTIONAL, "point": LIGHT_POINT, "camera": LIGHT_CAMERA}
 _LIGHT_KINDS = '"directional", "point" or "camera"'
 
+MAX_SCENE_BYTES = 1024 * 2**20
+"""Largest scene file read (1 GiB: about 15 million points in JSON)."""
+
 # Largest condition number accepted for the left 3x3 block of a projection matrix.
 _MAX_CAMERA_COND = 1e12
 # A directional light closer than this to the ray direction leaves the normal undefined.
@@ -712,6 +715,9 @@ class Scene:
 
         """
         where = _path_text(path)
+        from ._atomic import check_size
+
+        check_size(path, MAX_SCENE_BYTES, where)
         try:
             raw = Path(path).read_bytes()
         except FileNotFoundError:
@@ -742,17 +748,22 @@ class Scene:
     def save(self, path: str | os.PathLike) -> None:
         """Write the scene as a JSON file.
 
+        The file is written to a unique temporary file beside it and renamed: a failure (a
+        full disk) leaves a file already at ``path`` as it was.
+
         Args:
-            path: The file; it is overwritten.
+            path: The file; it is replaced.
 
         Raises:
             SceneError: If the file cannot be written.
 
         """
+        from ._atomic import atomic_write
+
         where = _path_text(path)
         text = json.dumps(self.to_dict(), indent=1, allow_nan=False)
         try:
-            Path(path).write_text(text + "\n", encoding="utf-8")
+            atomic_write(path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
         except (OSError, ValueError, TypeError) as exc:
             reason = getattr(exc, "strerror", None) or exc
             raise _error(where, f"cannot write the scene file ({reason})") from None
@@ -1026,6 +1037,13 @@ def _ray_box(
     far = tmax.min(axis=1) if len(tmax) else np.zeros(0)
     hits = near <= far
     return hits, hits & (far >= 0)
+
+
+def rays_meet_box(
+    origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray:
+    """Whether each ray (not its backward half) enters the box ``[lo, hi]``."""
+    return _ray_box(origins, dirs, lo, hi)[1]
 
 
 class _DuplicateKey(Exception):
