@@ -1,12 +1,16 @@
 """The ``warpspec`` command line: a thin layer over the Python API.
 
-Errors in the input (a scene field, an argument, a file) are reported as one line on standard
-error with exit status 2, before any work is done; a run that fails for another reason (a
-non-finite level set, no surface, a file that cannot be written) exits with status 1, and an
-interrupted one with 130. Legal but suspicious input is reported as one ``warning:`` line each.
+Exit statuses: 0 done; 1 the run failed (a non-finite level set, no surface, a file that
+cannot be written); 2 bad input (a scene field, an argument, a file; one line naming it,
+before any work is done); 3 the data does not support the result (see
+:mod:`warpspec.verdict`; nothing is written unless ``--keep-unsupported``); 130 and 143
+interrupted by SIGINT or SIGTERM. Legal but suspicious input is reported as ``warning:`` lines,
+at most three of a kind and a count of the rest.
 
-Outputs are written to temporary files next to their targets and renamed only when all of them
-are complete, so an interrupted or failed run leaves no partial file behind.
+No output may name an input (resolved paths and hard links are compared). Outputs are written
+to unique temporary files next to their targets and renamed only when all of them are
+complete; the temporary files are removed on every exit path, signals included, so an
+interrupted or failed run leaves no partial file behind.
 
 COLMAP models enter through their own subcommand, ``warpspec import-colmap``, which writes a
 scene file for ``warpspec reconstruct``: the scene file stays the one input of the solver, the
@@ -410,6 +414,11 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
 def _cmd_import_colmap(args: argparse.Namespace) -> int:
     out = output_path(args.output, SCENE_FORMATS, "--output")
+    model = Path(args.model)
+    check_paths({"--output": out},
+                {"--highlights": Path(args.highlights) if args.highlights else None,
+                 **{f"the model's {name}": model / name for name in
+                    ("cameras.txt", "images.txt", "points3D.txt")}})
     from .colmap import import_colmap, parse_light
 
     light = parse_light(args.light, field="--light") if args.light is not None else None

@@ -101,7 +101,7 @@ def write_ply(
     """Write a triangle mesh as binary little-endian PLY (float vertices, int indices).
 
     The layout is the one trimesh writes; the command line uses it for ``.ply`` so that a run
-    need not import trimesh (and SciPy) at all.
+    need not import trimesh at all.
 
     Args:
         path: The file to write (overwritten; callers write through a temporary file).
