@@ -11,6 +11,7 @@ from .grid import Grid
 from .redistance import point_distance, redistance
 from .scene import Light, Scene, SceneWarning
 from .solver import Reconstructor, Result, reconstruct
+from .verdict import Verdict
 
 __version__ = "0.1.0"
 
@@ -24,6 +25,7 @@ __all__ = [
     "Scene",
     "SceneError",
     "SceneWarning",
+    "Verdict",
     "__version__",
     "load_colmap",
     "point_distance",

@@ -26,6 +26,7 @@ __all__ = [
     "check_paths",
     "install_signal_cleanup",
     "remove_live_temps",
+    "restore_signals",
     "same_file",
     "temp_beside",
 ]
@@ -213,16 +214,28 @@ def _on_signal(signum: int, frame: object) -> None:
     raise Terminated(signum)
 
 
-def install_signal_cleanup(signals: Iterable[int] = (signal.SIGTERM,)) -> None:
+def install_signal_cleanup(signals: Iterable[int] = (signal.SIGTERM,)) -> dict[int, object]:
     """On these signals, remove the live temporary files and raise :class:`Terminated`.
 
     The exception unwinds through the writers' cleanup, so the command line can report the
     interruption and exit with ``128 + signum``. Only possible in the main thread; elsewhere
     this does nothing.
+
+    Returns:
+        The previous handlers, for :func:`restore_signals`.
     """
+    previous = {}
     for signum in signals:
         with contextlib.suppress(ValueError, OSError):
-            signal.signal(signum, _on_signal)
+            previous[signum] = signal.signal(signum, _on_signal)
+    return previous
+
+
+def restore_signals(previous: Mapping[int, object]) -> None:
+    """Put back the handlers :func:`install_signal_cleanup` replaced."""
+    for signum, handler in previous.items():
+        with contextlib.suppress(ValueError, OSError, TypeError):
+            signal.signal(signum, handler)
 
 
 def check_size(path: str | os.PathLike, limit: int, field: str) -> int:

@@ -44,6 +44,7 @@ from ._atomic import (
     check_paths,
     install_signal_cleanup,
     remove_live_temps,
+    restore_signals,
 )
 from ._cli_common import (
     finite,
@@ -619,8 +620,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a bad argument (already reported)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    install_signal_cleanup()
+    previous = install_signal_cleanup()
     WRITTEN.clear()
+    try:
+        return _run(args)
+    finally:
+        restore_signals(previous)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run one subcommand and turn its outcome into the exit status."""
     try:
         with _warnings_as_lines(getattr(args, "quiet", False)):
             return args.func(args)
