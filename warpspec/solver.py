@@ -183,6 +183,14 @@ def _npz_header(archive: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], np
     return tuple(shape), np.dtype(dtype)
 
 
+def _free_host_memory() -> int | None:
+    """Bytes of physical memory free now, or ``None`` where the system does not say."""
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 def load_state(path: str | os.PathLike, *, max_nodes: int | None = None) -> tuple[np.ndarray, Grid]:
     """Read a level set saved by :func:`save_state`.
 
@@ -224,6 +232,12 @@ def load_state(path: str | os.PathLike, *, max_nodes: int | None = None) -> tupl
             if len(shape) != 3 or dtype.kind != "f" or count > limit:
                 raise InputError(f"{not_state} or is too large: 'phi' is declared {dtype} of "
                                  f"shape {shape} (at most {limit:.3g} float values)")
+            need = count * (dtype.itemsize + 4)  # the array as stored, then as float32
+            free = _free_host_memory()
+            if free is not None and need > free:
+                raise InputError(f"resume: {where} holds a level set of shape {shape} that "
+                                 f"needs {need / 2**30:.1f} GiB to read, but only "
+                                 f"{free / 2**30:.1f} GiB of memory is free")
             member = archive.getinfo("phi.npy")
             if member.file_size > count * dtype.itemsize + 4096:
                 raise InputError(f"{not_state}: 'phi.npy' expands to {member.file_size} bytes, "
