@@ -586,3 +586,26 @@ def test_a_level_set_larger_than_free_memory_is_refused_unread(tmp_path, monkeyp
     monkeypatch.setattr("os.sysconf", lambda name: pages[name])
     with pytest.raises(ws.InputError, match=r"needs 1\.6 GiB to read, but only 1\.0 GiB"):
         load_state(path)
+
+
+def test_a_points_only_scene_is_judged_by_its_points():
+    data = octant_data()
+    data["specularities"] = []
+    result = ws.reconstruct(ws.Scene.from_dict(data), iterations=4, resolution=16,
+                            device="cpu")
+    v = result.verdict
+    assert v.rays == 0 and np.isnan(v.hit_fraction) and np.isnan(v.normal_error_deg)
+    assert v.supported and v.point_distance < 0.5
+    assert "no specular rays" in v.summary() and "nan" not in v.summary()
+
+
+def test_written_files_follow_the_umask(folder):
+    old = os.umask(0o027)
+    try:
+        ws.Scene.load(OCTANT).save(folder / "copy.json")
+    finally:
+        os.umask(old)
+    # The mask was read when the package was imported; the file gets 0o666 minus that mask.
+    from warpspec._atomic import _UMASK
+
+    assert (folder / "copy.json").stat().st_mode & 0o777 == 0o666 & ~_UMASK

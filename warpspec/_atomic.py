@@ -44,10 +44,13 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
-def _umask() -> int:
+def _read_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+_UMASK = _read_umask()  # read once: os.umask is process-wide and writers may run in threads
 
 
 def temp_beside(path: str | os.PathLike) -> Path:
@@ -62,7 +65,7 @@ def temp_beside(path: str | os.PathLike) -> Path:
     os.close(fd)
     _LIVE.add(name)
     with contextlib.suppress(OSError):
-        os.chmod(name, 0o666 & ~_umask())
+        os.chmod(name, 0o666 & ~_UMASK)
     return Path(name)
 
 

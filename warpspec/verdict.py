@@ -110,8 +110,9 @@ class Verdict:
         def f(v: float, spec: str) -> str:
             return "n/a" if not math.isfinite(v) else format(v, spec)
 
-        figures = (f"{f(100 * self.hit_fraction, '.0f')}% of {self.rays} rays hit, normal "
-                   f"error {f(self.normal_error_deg, '.2f')} deg, points "
+        rays = (f"{f(100 * self.hit_fraction, '.0f')}% of {self.rays} rays hit"
+                if self.rays else "no specular rays")
+        figures = (f"{rays}, normal error {f(self.normal_error_deg, '.2f')} deg, points "
                    f"{f(self.point_distance, '.2f')} voxel from the surface, "
                    f"{100 * self.supported_fraction:.0f}% of the mesh within "
                    f"{SUPPORT_RADIUS:g} voxels of a constraint")
