@@ -1,9 +1,9 @@
 """Subcommands for synthetic scenes and evaluation (``warpspec synth``, ``warpspec evaluate``).
 
-Both report bad input as :class:`warpspec.errors.SceneError` with a one-line message that names
-the flag; ``warpspec.cli.main`` turns it into exit status 2. Files are written through a
-temporary file in the same folder and ``os.replace``, so an interrupted run leaves no partial
-file behind.
+Both report bad input as :class:`warpspec.errors.InputError` with a one-line message that names
+the flag; ``warpspec.cli.main`` turns it into exit status 2. No output may name an input, and
+files are written through unique temporary files in the same folder and renamed together, so
+an interrupted or failed run leaves no partial file behind.
 """
 
 from __future__ import annotations

@@ -402,7 +402,8 @@ class Reconstructor:
         resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used).
 
     Raises:
-        SceneError: If an option is out of range, or the grid would not fit on the device.
+        InputError: If an option is out of range or of the wrong type, the grid would not fit
+            on the device, or ``resume`` is not a level set saved on a grid holding the scene.
     """
 
     def __init__(
@@ -861,7 +862,11 @@ def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int = 300, **op
         **options: Keyword options of :class:`Reconstructor`.
 
     Returns:
-        The :class:`Result`.
+        The :class:`Result`, with its :attr:`~Result.verdict` and :attr:`~Result.support`.
+
+    Raises:
+        InputError: For a bad option or file (``SceneError`` for a field of the scene).
+        ReconstructionError: If the run fails (a non-finite level set, no surface).
     """
     init()
     if not isinstance(scene, Scene):
