@@ -156,12 +156,13 @@ def test_counts_must_be_positive_integers(capsys, scene, tmp_path, flag, value):
         (["-o", "{tmp}/x.ply", "--bulge-cap", "0"], "--bulge-cap"),
         (["-o", "{tmp}/x.ply", "--reinit-every", "-2"], "--reinit-every"),
         (["-o", "{tmp}/x.ply", "--crop", "box"], "--crop"),
-        (["-o", "{tmp}/x.ply", "--resolution", "200000"], "--resolution: a 200001x"),
+        (["-o", "{tmp}/x.ply", "--resolution", "2000"], "--resolution: a 2001x"),
+        (["-o", "{tmp}/x.ply", "--resolution", "200000"], "--resolution: must be at most"),
         ([], "--output"),
     ],
     ids=["output-ext", "output-folder", "metrics-ext", "save-phi-ext", "render-ext",
          "plot-folder", "same-file", "device", "resume-missing", "alpha-negative", "alpha-nan",
-         "bulge-cap", "reinit", "crop", "too-large-for-memory", "no-output"],
+         "bulge-cap", "reinit", "crop", "too-many-nodes", "too-large", "no-output"],
 )
 def test_bad_arguments_exit_2_naming_the_flag(capsys, scene, tmp_path, args, field):
     argv = [a.format(tmp=tmp_path) for a in args]

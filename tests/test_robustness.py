@@ -48,7 +48,7 @@ def _interrupt_solver(monkeypatch):
 
 
 def _interrupt_mesh_export(monkeypatch):
-    def write_ply(path, vertices, faces):
+    def write_ply(path, vertices, faces, **kwargs):
         Path(path).write_bytes(b"ply\nformat ascii 1.0\nelement vertex 99")  # half a mesh
         raise KeyboardInterrupt
 
@@ -96,7 +96,7 @@ def test_an_interrupted_run_keeps_the_previous_output(capsys, folder, monkeypatc
 
 
 def test_a_failed_write_is_one_line_and_leaves_nothing(capsys, folder, monkeypatch):
-    def write_ply(path, vertices, faces):
+    def write_ply(path, vertices, faces, **kwargs):
         Path(path).write_bytes(b"ply\n")
         raise OSError(28, "No space left on device")
 

@@ -174,13 +174,15 @@ def test_reconstruct_accepts_a_path_and_leaves_the_scene_alone(octant, tmp_path)
 )
 def test_bad_options_name_the_field(octant, option, value, field):
     options = {"resolution": 16, "iterations": 1, option: value}
-    with pytest.raises(ws.SceneError, match=f"^{field}:"):
+    with pytest.raises(ws.InputError, match=f"^{field}:"):
         ws.reconstruct(octant, **options)
 
 
-def test_a_grid_too_large_for_memory_is_refused_before_allocating(octant):
-    with pytest.raises(ws.SceneError, match=r"resolution: .* needs about .* GiB"):
-        ws.Reconstructor(octant, resolution=20000, device="cpu")
+def test_a_grid_too_large_for_memory_is_refused_before_allocating(octant, monkeypatch):
+    pages = {"SC_AVPHYS_PAGES": 2**18, "SC_PAGE_SIZE": 4096}  # 1 GiB free
+    monkeypatch.setattr("os.sysconf", lambda name: pages[name])
+    with pytest.raises(ws.InputError, match=r"resolution: .* needs about 1\.\d GiB"):
+        ws.Reconstructor(octant, resolution=400, device="cpu")
 
 
 def test_a_run_that_loses_its_surface_says_so(octant):

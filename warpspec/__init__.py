@@ -6,16 +6,18 @@ obey the law of reflection.
 """
 
 from .colmap import load_colmap
-from .errors import ReconstructionError, SceneError
+from .errors import InputError, ReconstructionError, SceneError
 from .grid import Grid
 from .redistance import point_distance, redistance
 from .scene import Light, Scene, SceneWarning
 from .solver import Reconstructor, Result, reconstruct
+from .verdict import Verdict
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Grid",
+    "InputError",
     "Light",
     "ReconstructionError",
     "Reconstructor",
@@ -23,6 +25,7 @@ __all__ = [
     "Scene",
     "SceneError",
     "SceneWarning",
+    "Verdict",
     "__version__",
     "load_colmap",
     "point_distance",

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
-import glob
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import SceneError
+from ._atomic import atomic_write
+from .errors import InputError
 
 __all__ = [
     "atomic_write",
@@ -22,49 +21,35 @@ __all__ = [
     "output_path",
     "positive",
     "positive_int",
-    "remove_temps",
-    "temp_path",
 ]
-
-def temp_path(path: Path) -> Path:
-    """A hidden temporary name next to ``path`` that keeps its extension."""
-    return path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
-
-
-def remove_temps(tmp: Path) -> None:
-    """Remove ``tmp`` and anything a writer derived from its name (``tmp.part``...)."""
-    pattern = glob.escape(str(tmp.with_suffix(""))) + "*"
-    for name in glob.glob(pattern):
-        with contextlib.suppress(OSError):
-            os.unlink(name)
 
 
 def output_path(path: str, allowed: Sequence[str], flag: str) -> Path:
     """An output path with a known extension in a folder that exists and can be written."""
     p = Path(path)
     if p.suffix.lower() not in allowed:
-        raise SceneError(
+        raise InputError(
             f"{flag}: {path!r} has an unsupported extension; use one of {', '.join(allowed)}"
         )
     parent = p.parent
     if not parent.is_dir():
-        raise SceneError(f"{flag}: the folder {str(parent)!r} does not exist")
+        raise InputError(f"{flag}: the folder {str(parent)!r} does not exist")
     if p.is_dir():
-        raise SceneError(f"{flag}: {path!r} is a folder, expected a file name")
+        raise InputError(f"{flag}: {path!r} is a folder, expected a file name")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise SceneError(f"{flag}: the folder {str(parent)!r} is not writable")
+        raise InputError(f"{flag}: the folder {str(parent)!r} is not writable")
     return p
 
 
 def input_file(path: str, flag: str) -> Path:
     p = Path(path)
     if not p.exists():
-        raise SceneError(f"{flag}: no such file {path!r}")
+        raise InputError(f"{flag}: no such file {path!r}")
     if p.is_dir():
         hint = ""
         if (p / "cameras.txt").exists() or (p / "cameras.bin").exists():
             hint = "; for a COLMAP model, make a scene file with 'warpspec import-colmap' first"
-        raise SceneError(f"{flag}: {path!r} is a folder, expected a file{hint}")
+        raise InputError(f"{flag}: {path!r} is a folder, expected a file{hint}")
     return p
 
 
@@ -113,17 +98,3 @@ def positive(text: str) -> float:
 
 def integer(text: str) -> int:
     return _int_at_least(text, None, "an integer")
-
-
-def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``.
-
-    On any failure the temporary file (and anything derived from its name) is removed, and a
-    file already at ``path`` is left as it was.
-    """
-    tmp = temp_path(path)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        remove_temps(tmp)

@@ -1,12 +1,16 @@
 """The ``warpspec`` command line: a thin layer over the Python API.
 
-Errors in the input (a scene field, an argument, a file) are reported as one line on standard
-error with exit status 2, before any work is done; a run that fails for another reason (a
-non-finite level set, no surface, a file that cannot be written) exits with status 1, and an
-interrupted one with 130. Legal but suspicious input is reported as one ``warning:`` line each.
+Exit statuses: 0 done; 1 the run failed (a non-finite level set, no surface, a file that
+cannot be written); 2 bad input (a scene field, an argument, a file; one line naming it,
+before any work is done); 3 the data does not support the result (see
+:mod:`warpspec.verdict`; nothing is written unless ``--keep-unsupported``); 130 and 143
+interrupted by SIGINT or SIGTERM. Legal but suspicious input is reported as ``warning:`` lines,
+at most three of a kind and a count of the rest.
 
-Outputs are written to temporary files next to their targets and renamed only when all of them
-are complete, so an interrupted or failed run leaves no partial file behind.
+No output may name an input (resolved paths and hard links are compared). Outputs are written
+to unique temporary files next to their targets and renamed only when all of them are
+complete; the temporary files are removed on every exit path, signals included, so an
+interrupted or failed run leaves no partial file behind.
 
 COLMAP models enter through their own subcommand, ``warpspec import-colmap``, which writes a
 scene file for ``warpspec reconstruct``: the scene file stays the one input of the solver, the
@@ -31,8 +35,18 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from ._cli_common import (
+from ._atomic import (
+    WRITTEN,
+    StagedOutputs,
+    Terminated,
+    WriteError,
     atomic_write,
+    check_paths,
+    install_signal_cleanup,
+    remove_live_temps,
+    restore_signals,
+)
+from ._cli_common import (
     finite,
     input_file,
     non_negative,
@@ -40,10 +54,8 @@ from ._cli_common import (
     output_path,
     positive,
     positive_int,
-    remove_temps,
-    temp_path,
 )
-from .errors import ReconstructionError, SceneError
+from .errors import InputError, ReconstructionError
 
 __all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"]
 
@@ -77,32 +89,12 @@ def _version() -> str:
 
 
 
-class _Outputs:
-    """Outputs written to temporary files, then renamed together (or all discarded)."""
-
-    def __init__(self) -> None:
-        self.staged: list[tuple[Path, Path]] = []
-
-    def stage(self, path: Path, write: Callable[[Path], object]) -> None:
-        tmp = temp_path(path)
-        self.staged.append((tmp, path))
-        try:
-            write(tmp)
-        except OSError as exc:
-            raise ReconstructionError(
-                f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
-        if not tmp.exists():
-            raise ReconstructionError(f"cannot write {str(path)!r}: the writer made no file")
-
-    def commit(self) -> None:
-        for tmp, path in self.staged:
-            os.replace(tmp, path)
-        self.staged.clear()
-
-    def discard(self) -> None:
-        for tmp, _ in self.staged:
-            remove_temps(tmp)
-        self.staged.clear()
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_INPUT = 2
+EXIT_UNSUPPORTED = 3
+EXIT_INTERRUPTED = 130  # SIGINT (Ctrl-C)
+EXIT_TERMINATED = 143  # SIGTERM
 
 
 def _metrics_writer(history: list[dict], suffix: str) -> Callable[[Path], None]:
@@ -128,12 +120,16 @@ def write_metrics(path: Path, history: list[dict]) -> None:
     atomic_write(path, _metrics_writer(history, path.suffix.lower()))
 
 
-def _mesh_writer(mesh, suffix: str) -> Callable[[Path], None]:
-    """Write ``mesh`` (a Trimesh, or anything with vertices and faces for PLY) as ``suffix``."""
+def _mesh_writer(mesh, suffix: str, support=None) -> Callable[[Path], None]:
+    """Write ``mesh`` (a Trimesh, or anything with vertices and faces for PLY) as ``suffix``.
+
+    PLY carries ``support`` (per vertex, voxel widths to the nearest constraint) when given.
+    """
     if suffix == ".ply":  # written directly: a run that writes PLY never imports trimesh
         from .mesh import write_ply
 
-        return lambda tmp: write_ply(tmp, mesh.vertices, mesh.faces)
+        extra = None if support is None else {"support": support}
+        return lambda tmp: write_ply(tmp, mesh.vertices, mesh.faces, vertex_properties=extra)
     if not hasattr(mesh, "export"):
         mesh = mesh.mesh  # a Result: its Trimesh
     return lambda tmp: mesh.export(tmp, file_type=suffix[1:])
@@ -150,24 +146,12 @@ def write_mesh(path: Path, mesh) -> None:
 
 
 
-def _distinct(outputs: dict[str, Path | None]) -> None:
-    seen: dict[Path, str] = {}
-    for flag, path in outputs.items():
-        if path is None:
-            continue
-        key = path.resolve()
-        if key in seen:
-            raise SceneError(f"{flag}: {str(path)!r} is also the file of {seen[key]}")
-        seen[key] = flag
-
-
-
-def _flag_message(exc: SceneError) -> SceneError:
+def _flag_message(exc: InputError) -> InputError:
     """Name the command-line flag instead of the Python option in an API message."""
     text = str(exc)
     name, sep, rest = text.partition(":")
     if sep and name in _FLAGS:
-        return SceneError(f"{_FLAGS[name]}:{rest}")
+        return type(exc)(f"{_FLAGS[name]}:{rest}")
     return exc
 
 
@@ -226,6 +210,10 @@ def _warnings_as_lines(quiet: bool):
     with warnings.catch_warnings():
         if quiet:
             warnings.simplefilter("ignore")
+        # NumPy's floating-point warnings say nothing a user can act on: the checks that
+        # follow them (finite values, a surface) report the problem in the field's words.
+        warnings.filterwarnings("ignore", category=RuntimeWarning,
+                                message=r"(overflow|underflow|invalid value|divide by zero)")
         warnings.showwarning = show
         yield
 
@@ -253,6 +241,32 @@ def _fmt(value: float, spec: str) -> str:
 # Subcommands
 
 
+def _check_scene(scene) -> None:
+    """Warn about suspicious input, at most a few lines per kind (not one line per ray)."""
+    import re
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene.check()
+    groups: dict[str, list[str]] = {}
+    for w in caught:
+        text = " ".join(str(w.message).split())
+        # One kind: the message with its indices and numbers taken out.
+        kind = re.sub(r"\[[^\]]*\]|-?\d[\d.e+-]*", "#", text)
+        groups.setdefault(kind, []).append(text)
+    for texts in groups.values():
+        for text in texts[:_WARNINGS_PER_KIND]:
+            warnings.warn(text, stacklevel=1)
+        if len(texts) > _WARNINGS_PER_KIND:
+            field = texts[0].split(":", 1)[0]
+            field = re.sub(r"\[\d+\]", "[...]", field)
+            warnings.warn(f"{field}: {len(texts) - _WARNINGS_PER_KIND} more like the above "
+                          f"({len(texts)} in all)", stacklevel=1)
+
+
+_WARNINGS_PER_KIND = 3
+
+
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     # Every argument is checked before the scene is read, and the scene before any work.
     out = output_path(args.output, MESH_FORMATS, "--output")
@@ -260,9 +274,11 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     save_phi = output_path(args.save_phi, (".npz",), "--save-phi") if args.save_phi else None
     render = output_path(args.render, PICTURE_FORMATS, "--render") if args.render else None
     plot = output_path(args.plot, PICTURE_FORMATS, "--plot") if args.plot else None
-    _distinct({"--output": out, "--metrics": metrics, "--save-phi": save_phi,
-               "--render": render, "--plot": plot})
     resume = input_file(args.resume, "--resume") if args.resume else None
+    scene_path = input_file(args.scene, "scene")
+    check_paths({"--output": out, "--metrics": metrics, "--save-phi": save_phi,
+                 "--render": render, "--plot": plot},
+                {"the scene": scene_path, "--resume": resume})
     if render is not None or plot is not None:
         from .plots import require_matplotlib
 
@@ -270,17 +286,16 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     if resume is not None and args.resolution is not None:
         warnings.warn("--resolution is ignored with --resume: the saved grid is used",
                       stacklevel=1)
-    scene_path = input_file(args.scene, "scene")
 
     from .scene import Scene
 
     scene = Scene.load(scene_path)
     constraints = scene.num_points + scene.num_specularities
     if args.crop == "hull" and constraints < 3:
-        raise SceneError("--crop: the hull needs at least 3 constraints (points and "
+        raise InputError("--crop: the hull needs at least 3 constraints (points and "
                          f"specularities), the scene has {constraints}")
     if not args.quiet:
-        scene.check()
+        _check_scene(scene)
 
     from ._runtime import resolve_device
 
@@ -299,7 +314,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             reinit_every=args.reinit_every,
             resume=resume,
         )
-    except SceneError as exc:
+    except InputError as exc:
         raise _flag_message(exc) from None
 
     progress = _Progress(args.iterations, enabled=not args.quiet and sys.stderr.isatty())
@@ -311,56 +326,100 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     result = solver.result()
+    verdict = result.verdict
+    if not verdict.supported and not args.keep_unsupported:
+        _say(f"{verdict.summary()}; nothing was written (--keep-unsupported writes the "
+             "outputs anyway)")
+        return EXIT_UNSUPPORTED
+
     mesh = result  # its vertices and faces; result.mesh (trimesh) only where one is needed
+    support = result.support
     if args.crop == "hull":
         from .mesh import crop_to_hull
 
         try:
             mesh = crop_to_hull(result.mesh, result.constraint_anchors(scene))
-        except (SceneError, ReconstructionError) as exc:
+        except (InputError, ReconstructionError) as exc:
             raise ReconstructionError(f"--crop hull: {exc}") from None
+        from .verdict import support_distance
 
-    outputs = _Outputs()
-    try:
-        outputs.stage(out, _mesh_writer(mesh, out.suffix.lower()))
+        support = support_distance(mesh.vertices, result.constraint_anchors(scene),
+                                   result.grid.spacing)
+    elif args.crop == "support":
+        from types import SimpleNamespace
+
+        from .mesh import crop_to_support
+        from .verdict import SUPPORT_RADIUS
+
+        try:
+            vertices, faces, support = crop_to_support(result.vertices, result.faces,
+                                                       result.support, SUPPORT_RADIUS)
+        except ReconstructionError as exc:
+            raise ReconstructionError(f"--crop support: {exc}") from None
+        if out.suffix.lower() == ".ply":
+            mesh = SimpleNamespace(vertices=vertices, faces=faces)
+        else:
+            import trimesh
+
+            mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+
+    with StagedOutputs() as outputs:
+        outputs.stage(out, _mesh_writer(mesh, out.suffix.lower(), support))
         if metrics is not None:
             outputs.stage(metrics, _metrics_writer(result.history, metrics.suffix.lower()))
         if save_phi is not None:
-            outputs.stage(save_phi, result.save_phi)
+            from .solver import write_state
+
+            outputs.stage(save_phi, lambda tmp: write_state(tmp, result.phi, result.grid))
         if render is not None:
             from .plots import render_mesh
 
+            shown = mesh
+            if mesh is result:
+                shown = result.mesh
+            elif not hasattr(mesh, "export"):
+                import trimesh
+
+                shown = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False)
             normals = _constraint_normals(scene, result.hits)
             outputs.stage(render, lambda tmp: render_mesh(
-                result.mesh if mesh is result else mesh, tmp, points=scene.points,
+                shown, tmp, points=scene.points,
                 hits=result.hits, normals=normals,
                 cameras=scene.camera_centres(),
                 title=f"{Path(args.scene).name}: {len(mesh.faces)} faces"
-                      f"{' (cropped to the hull)' if args.crop else ''}"))
+                      f"{f' (cropped: {args.crop})' if args.crop else ''}"))
         if plot is not None:
             from .plots import plot_history
 
             outputs.stage(plot, lambda tmp: plot_history(
                 result.history, tmp, title=f"{Path(args.scene).name}: convergence"))
         outputs.commit()
-    finally:
-        outputs.discard()
 
     last = result.history[-1]
+    if not verdict.supported:
+        _say(f"warning: {verdict.summary()}; written anyway (--keep-unsupported)")
     if not args.quiet:
         if last["misses"]:
             _say(f"warning: {last['misses']} of {scene.num_specularities} specular rays miss "
                  "the final surface; their normals were not used")
+        if verdict.supported:
+            _say(verdict.summary())
+        begun = f" (resumed from {resume})" if resume is not None else ""
         _say(
-            f"wrote {out} ({len(mesh.faces)} faces) in {time.perf_counter() - start:.1f} s: "
-            f"normal error {_fmt(last['normal_error'], '.4g')}, point error "
+            f"wrote {out} ({len(mesh.faces)} faces) in {time.perf_counter() - start:.1f} s"
+            f"{begun}: normal error {_fmt(last['normal_error'], '.4g')}, point error "
             f"{_fmt(last['point_error'], '.3g')} voxel, {last['misses']} missed rays"
         )
-    return 0
+    return EXIT_OK
 
 
 def _cmd_import_colmap(args: argparse.Namespace) -> int:
     out = output_path(args.output, SCENE_FORMATS, "--output")
+    model = Path(args.model)
+    check_paths({"--output": out},
+                {"--highlights": Path(args.highlights) if args.highlights else None,
+                 **{f"the model's {name}": model / name for name in
+                    ("cameras.txt", "images.txt", "points3D.txt")}})
     from .colmap import import_colmap, parse_light
 
     light = parse_light(args.light, field="--light") if args.light is not None else None
@@ -382,14 +441,11 @@ def _cmd_import_colmap(args: argparse.Namespace) -> int:
     data["_images"] = list(imported.image_names)
     data["_point_ids"] = list(imported.point_ids)
     text = json.dumps(data, indent=1, allow_nan=False) + "\n"
-    outputs = _Outputs()
-    try:
+    with StagedOutputs() as outputs:
         outputs.stage(out, lambda tmp: tmp.write_text(text, encoding="utf-8"))
         outputs.commit()
-    finally:
-        outputs.discard()
     if not args.quiet:
-        scene.check()
+        _check_scene(scene)
         _say(f"wrote {out}: {scene.num_cameras} cameras, {scene.num_specularities} "
              f"specularities, {scene.num_points} points")
     return 0
@@ -496,8 +552,14 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--save-phi", default=None, help="keep the level set and its grid (.npz)")
     rec.add_argument("--resume", default=None, help="continue from a level set saved with "
                                                     "--save-phi (its grid is used)")
-    rec.add_argument("--crop", default=None, choices=["hull"],
-                     help="keep only the faces inside the hull of the constraints")
+    rec.add_argument("--crop", default=None, choices=["hull", "support"],
+                     help="hull: keep only the faces inside the hull of the constraints; "
+                          "support: only the faces within 3 voxels of a constraint (a ray's "
+                          "hit or a point), the part the data determines")
+    rec.add_argument("--keep-unsupported", action="store_true",
+                     help="write the outputs even when the data does not support the result "
+                          "(most rays miss, the normals or the points disagree with the "
+                          "surface); without it such a run writes nothing and exits with 3")
     rec.add_argument("--render", default=None, metavar="FILE.png",
                      help="draw views of the mesh with the constraint points and normals "
                           "(needs matplotlib)")
@@ -545,6 +607,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status.
 
+    Statuses: 0 done; 1 the run failed (a non-finite level set, no surface, a file that
+    cannot be written); 2 bad input (one line naming the field); 3 the data does not support
+    the result (nothing written; ``--keep-unsupported`` writes it and exits 0); 130 and 143
+    interrupted by SIGINT and SIGTERM (temporary files removed, no output half-written).
+
     Args:
         argv: Arguments without the program name (default: ``sys.argv[1:]``).
     """
@@ -553,28 +620,50 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a bad argument (already reported)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    previous = install_signal_cleanup()
+    WRITTEN.clear()
+    try:
+        return _run(args)
+    finally:
+        restore_signals(previous)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run one subcommand and turn its outcome into the exit status."""
     try:
         with _warnings_as_lines(getattr(args, "quiet", False)):
             return args.func(args)
-    except SceneError as exc:
+    except InputError as exc:
         _say(f"error: {' '.join(str(exc).split())}")
-        return 2
+        return EXIT_INPUT
     except ReconstructionError as exc:
         _say(f"failed: {' '.join(str(exc).split())}")
-        return 1
-    except KeyboardInterrupt:
-        _say("interrupted; no output was written")
-        return 130
+        return EXIT_FAILED
+    except KeyboardInterrupt as exc:
+        remove_live_temps()
+        terminated = isinstance(exc, Terminated)
+        done = (f"only {', '.join(map(str, WRITTEN))} had been written" if WRITTEN else
+                "no output was written")
+        _say(f"{'terminated' if terminated else 'interrupted'}; {done}")
+        return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
+    except MemoryError:
+        remove_live_temps()
+        _say("failed: out of memory; lower the resolution or use a smaller input")
+        return EXIT_FAILED
+    except WriteError as exc:
+        _say(f"failed: {exc}")
+        return EXIT_FAILED
     except OSError as exc:
         where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
         _say(f"failed:{where} {exc.strerror or exc}")
-        return 1
+        return EXIT_FAILED
     except Exception as exc:  # a bug: one line, and the traceback only when asked for
+        remove_live_temps()
         if os.environ.get("WARPSPEC_DEBUG"):
             traceback.print_exc()
         _say(f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
              "(this is a bug in warpspec; set WARPSPEC_DEBUG=1 for the traceback)")
-        return 1
+        return EXIT_FAILED
 
 
 def entry() -> NoReturn:

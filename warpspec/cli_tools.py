@@ -1,9 +1,9 @@
 """Subcommands for synthetic scenes and evaluation (``warpspec synth``, ``warpspec evaluate``).
 
-Both report bad input as :class:`warpspec.errors.SceneError` with a one-line message that names
-the flag; ``warpspec.cli.main`` turns it into exit status 2. Files are written through a
-temporary file in the same folder and ``os.replace``, so an interrupted run leaves no partial
-file behind.
+Both report bad input as :class:`warpspec.errors.InputError` with a one-line message that names
+the flag; ``warpspec.cli.main`` turns it into exit status 2. No output may name an input, and
+files are written through unique temporary files in the same folder and renamed together, so
+an interrupted or failed run leaves no partial file behind.
 """
 
 from __future__ import annotations
@@ -15,12 +15,20 @@ import sys
 
 import numpy as np
 
-from ._cli_common import atomic_write, finite, input_file, integer, output_path
-from .errors import SceneError
+from ._atomic import StagedOutputs, atomic_write, check_paths, check_size
+from ._cli_common import finite, input_file, integer, output_path
+from .errors import InputError, SceneError
 
 __all__ = ["EVALUATE_DEFINITIONS", "add_parsers"]
 
 MESH_FORMATS = (".ply", ".obj", ".stl", ".off", ".glb")
+MAX_SAMPLES = 10_000_000
+"""Most area samples per mesh for ``evaluate`` (each costs a closest-point query: 10^7 take
+minutes and about 2 GiB)."""
+MAX_MESH_BYTES = 2 * 2**30
+"""Largest mesh file ``evaluate`` reads."""
+MAX_JSON_BYTES = 512 * 2**20
+"""Largest truth JSON file ``evaluate`` reads."""
 
 EVALUATE_DEFINITIONS = """\
 How each figure is defined:
@@ -66,23 +74,33 @@ def _load_mesh(text: str, flag: str):
     import trimesh
 
     path = input_file(text, flag)
+    check_size(path, MAX_MESH_BYTES, flag)
     try:
-        mesh = trimesh.load(path, force="mesh", process=False)
+        with np.errstate(all="ignore"):
+            mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
-        raise SceneError(f"{flag}: cannot read {text!r} as a mesh ({exc})") from None
+        reason = " ".join(str(exc).split())[:120]
+        raise InputError(f"{flag}: cannot read {text!r} as a mesh ({reason})") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise SceneError(f"{flag}: {text!r} holds no triangles")
+        raise InputError(f"{flag}: {text!r} holds no triangles")
+    faces = np.asarray(mesh.faces)
+    if faces.min() < 0 or faces.max() >= len(mesh.vertices):
+        raise InputError(f"{flag}: {text!r} has faces that index vertices out of range "
+                         f"(0 to {len(mesh.vertices) - 1}, found {faces.min()} to {faces.max()})")
     if not np.all(np.isfinite(mesh.vertices)):
-        raise SceneError(f"{flag}: {text!r} has non-finite vertices")
+        raise InputError(f"{flag}: {text!r} has non-finite vertices")
     return mesh
 
 
 def _load_truth_json(text: str, flag: str) -> dict:
     path = input_file(text, flag)
+    check_size(path, MAX_JSON_BYTES, flag)
     try:
         data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SceneError(f"{flag}: {text!r} is not readable JSON ({exc})") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError,
+            ValueError) as exc:
+        reason = " ".join(str(exc).split())[:120]
+        raise SceneError(f"{flag}: {text!r} is not readable JSON ({reason})") from None
     if not isinstance(data, dict):
         raise SceneError(f"{flag}: {text!r} must hold a JSON object")
     out = {}
@@ -98,7 +116,11 @@ def _load_truth_json(text: str, flag: str) -> dict:
         except (TypeError, ValueError):
             raise SceneError(f"{flag}: field {key!r} of {text!r} is not numeric") from None
         if key == "outliers":
-            out[key] = arr.astype(np.int64).reshape(-1)
+            flat = arr.reshape(-1)
+            if not np.all(np.isfinite(flat)) or np.any(flat != np.round(flat)):
+                raise SceneError(f"{flag}: field 'outliers' of {text!r} must hold integer "
+                                 "indices")
+            out[key] = flat.astype(np.int64)
             continue
         if arr.size and (arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr))):
             raise SceneError(f"{flag}: field {key!r} of {text!r} must be finite (N, 3) rows")
@@ -106,6 +128,11 @@ def _load_truth_json(text: str, flag: str) -> dict:
     if out["truth_points"].shape != out["truth_normals"].shape:
         raise SceneError(f"{flag}: 'truth_points' and 'truth_normals' of {text!r} differ in "
                          "length")
+    n = len(out["truth_points"])
+    outliers = out.get("outliers")
+    if outliers is not None and len(outliers) and (outliers.min() < 0 or outliers.max() >= n):
+        raise SceneError(f"{flag}: field 'outliers' of {text!r} holds indices out of range "
+                         f"(0 to {n - 1}, found {outliers.min()} to {outliers.max()})")
     return out
 
 
@@ -130,9 +157,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise SceneError(f"--outliers: must be a fraction in [0, 1], got {args.outliers:g}")
     if args.seed < 0:
         raise SceneError(f"--seed: must be a non-negative integer, got {args.seed}")
-    paths = [p for p in (out, truth, truth_json) if p is not None]
-    if len({p.resolve() for p in paths}) < len(paths):
-        raise SceneError("--output, --truth and --truth-json must name different files")
+    check_paths({"--output": out, "--truth": truth, "--truth-json": truth_json})
 
     options = {}
     if args.highlights is not None:
@@ -147,16 +172,20 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         if str(exc).startswith("highlights:"):
             raise SceneError(f"--{exc}") from None
         raise
-    atomic_write(out, lambda tmp: synthetic.to_json(tmp))
     written = [str(out)]
-    if truth is not None:
-        mesh = synthetic.truth_mesh()
-        atomic_write(truth, lambda tmp: mesh.export(tmp, file_type=truth.suffix.lower()[1:]))
-        written.append(f"{truth} ({len(mesh.faces)} faces)")
-    if truth_json is not None:
-        text = json.dumps(synthetic.truth_dict(), indent=1) + "\n"
-        atomic_write(truth_json, lambda tmp: tmp.write_text(text))
-        written.append(str(truth_json))
+    # All or nothing: a scene without its truth is worse than no scene.
+    with StagedOutputs() as outputs:
+        outputs.stage(out, lambda tmp: synthetic.to_json(tmp))
+        if truth is not None:
+            mesh = synthetic.truth_mesh()
+            outputs.stage(truth, lambda tmp: mesh.export(tmp,
+                                                         file_type=truth.suffix.lower()[1:]))
+            written.append(f"{truth} ({len(mesh.faces)} faces)")
+        if truth_json is not None:
+            text = json.dumps(synthetic.truth_dict(), indent=1) + "\n"
+            outputs.stage(truth_json, lambda tmp: tmp.write_text(text))
+            written.append(str(truth_json))
+        outputs.commit()
     if not args.quiet:
         print(f"{args.name}: {len(synthetic.truth_points)} specularities "
               f"({int(synthetic.outlier_mask.sum())} outliers, noise {args.noise:g} px), "
@@ -209,8 +238,17 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .grid import Grid
 
     json_out = output_path(args.json, (".json",), "--json") if args.json else None
-    if args.samples < 100:
-        raise SceneError(f"--samples: must be at least 100, got {args.samples}")
+    check_paths({"--json": json_out},
+                {"MESH": input_file(args.mesh, "MESH"),
+                 "--truth": input_file(args.truth, "--truth"),
+                 "--scene": input_file(args.scene, "--scene") if args.scene else None,
+                 "--truth-json": (input_file(args.truth_json, "--truth-json")
+                                  if args.truth_json else None)})
+    if not 100 <= args.samples <= MAX_SAMPLES:
+        raise InputError(f"--samples: must be between 100 and {MAX_SAMPLES}, got "
+                         f"{args.samples}")
+    if args.seed < 0:
+        raise InputError(f"--seed: must be a non-negative integer, got {args.seed}")
     if args.spacing is not None and args.spacing <= 0:
         raise SceneError(f"--spacing: must be a positive length, got {args.spacing:g}")
     if args.resolution is not None and args.resolution < 2:

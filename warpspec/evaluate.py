@@ -25,6 +25,7 @@ queries require ``rtree``, which warpspec does not depend on.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -448,10 +449,16 @@ class Evaluation:
             f"Cropped to the constraint hull: {'yes' if self.cropped else 'no'}",
         ]
         if self.normal_angles is not None:
-            lines.append(
-                f"Normal angle at the true specular points: mean {self.normal_angle_mean:.4g} deg, "
-                f"max {self.normal_angle_max:.4g} deg ({len(self.normal_angles)} points)"
-            )
+            mean, top = self.normal_angle_mean, self.normal_angle_max
+            if mean is None or top is None or not (math.isfinite(mean) and math.isfinite(top)):
+                lines.append("Normal angle at the true specular points: not measured (no true "
+                             "specular point with a defined normal: no ray meets the truth, "
+                             "or the faces there are degenerate)")
+            else:
+                lines.append(
+                    f"Normal angle at the true specular points: mean {mean:.4g} deg, "
+                    f"max {top:.4g} deg ({len(self.normal_angles)} points)"
+                )
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -545,7 +552,9 @@ def evaluate(
                 )
         if len(sp):
             _, _, face, _ = closest_point(mesh, sp)
-            angles = _angle_deg(np.asarray(mesh.face_normals)[face], tn)
+            with np.errstate(all="ignore"):
+                angles = _angle_deg(np.asarray(mesh.face_normals)[face], tn)
+            angles = angles[np.isfinite(angles)]  # degenerate faces have no normal
         else:
             angles = np.zeros(0)
 

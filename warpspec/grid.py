@@ -2,13 +2,24 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import InputError
 
-__all__ = ["Grid"]
+__all__ = ["MAX_NODES", "MAX_RESOLUTION", "Grid"]
+
+MAX_NODES = 2**31 - 1
+"""Most nodes a grid may have: Warp indexes arrays with 32-bit integers."""
+MAX_RESOLUTION = 2048
+"""Most cells along the longest side (2048^3 nodes would already need 250 GiB)."""
+FLOAT32_RANGE = (1e-30, 1e30)
+"""Spacing and coordinates the float32 kernels carry without underflow or overflow."""
+MAX_COORDINATE_IN_CELLS = 1e5
+"""Largest distance of the grid from the world origin, in cells: float32 world positions
+resolve ``1e5 * 6e-8 = 0.006`` of a cell there; beyond it the kernels cannot place a node."""
 
 
 @dataclass(frozen=True)
@@ -31,11 +42,28 @@ class Grid:
         object.__setattr__(self, "spacing", float(self.spacing))
         object.__setattr__(self, "shape", tuple(int(s) for s in self.shape))
         if not np.all(np.isfinite(origin)):
-            raise SceneError(f"grid.origin: must be finite, got {origin.tolist()}")
+            raise InputError(f"grid.origin: must be finite, got {origin.tolist()}")
         if not (np.isfinite(self.spacing) and self.spacing > 0):
-            raise SceneError(f"grid.spacing: must be a positive finite number, got {self.spacing}")
+            raise InputError(f"grid.spacing: must be a positive finite number, got {self.spacing}")
         if len(self.shape) != 3 or min(self.shape) < 2:
-            raise SceneError(f"grid.shape: needs at least 2 nodes per axis, got {self.shape}")
+            raise InputError(f"grid.shape: needs at least 2 nodes per axis, got {self.shape}")
+        nodes = math.prod(self.shape)
+        if nodes > MAX_NODES:
+            raise InputError(
+                f"resolution: a {'x'.join(map(str, self.shape))} grid has {nodes:.3g} nodes, "
+                f"more than the {MAX_NODES:.3g} Warp can index; lower the resolution")
+        lo, hi = FLOAT32_RANGE
+        far = float(np.max(np.abs(origin) + self.spacing * (np.asarray(self.shape) - 1)))
+        if not lo <= self.spacing <= hi or far > hi:
+            raise InputError(
+                f"domain: a voxel width of {self.spacing:.3g} with coordinates up to {far:.3g} "
+                f"is outside what the float32 kernels carry ({lo:g} to {hi:g}); express the "
+                "scene in other units (metres or millimetres)")
+        if far > MAX_COORDINATE_IN_CELLS * self.spacing:
+            raise InputError(
+                f"domain: the grid lies {far / self.spacing:.3g} voxels from the world origin "
+                f"(at most {MAX_COORDINATE_IN_CELLS:g}): float32 positions cannot resolve a "
+                "voxel there; move the scene's origin near the object")
 
     @classmethod
     def from_bounds(
@@ -49,24 +77,36 @@ class Grid:
             resolution: Number of cells along the longest side of the box.
 
         Raises:
-            SceneError: If the box is empty or inverted, or the resolution is not a positive
+            InputError: If the box is empty or inverted, or the resolution is not a positive
                 integer.
         """
         if isinstance(resolution, bool) or not isinstance(resolution, int | np.integer):
-            raise SceneError(f"resolution: must be a positive integer, got {resolution!r}")
+            raise InputError(f"resolution: must be a positive integer, got {resolution!r}")
         if resolution < 2:
-            raise SceneError(f"resolution: must be at least 2 cells, got {resolution}")
+            raise InputError(f"resolution: must be at least 2 cells, got {resolution}")
+        if resolution > MAX_RESOLUTION:
+            raise InputError(f"resolution: must be at most {MAX_RESOLUTION} cells, got "
+                             f"{resolution}")
         lo = np.asarray(lo, dtype=np.float64).reshape(3)
         hi = np.asarray(hi, dtype=np.float64).reshape(3)
-        extent = hi - lo
+        with np.errstate(over="ignore", invalid="ignore"):
+            extent = hi - lo
         if not np.all(np.isfinite(extent)) or np.any(extent <= 0):
-            raise SceneError(
+            raise InputError(
                 f"domain: max must exceed min on every axis, got min={lo.tolist()} "
                 f"max={hi.tolist()}"
             )
         h = float(extent.max()) / int(resolution)
-        cells = np.maximum(np.ceil(extent / h - 1e-9).astype(int), 1)
+        if not h > 0:
+            raise InputError(f"domain: its extent {extent.max():.3g} is too small to divide "
+                             f"into {resolution} cells; express the scene in other units")
+        cells = np.maximum(np.ceil(np.minimum(extent / h, resolution) - 1e-9).astype(int), 1)
         return cls(origin=lo, spacing=h, shape=tuple(int(c) + 1 for c in cells))
+
+    def __repr__(self) -> str:
+        o = ", ".join(f"{v:.6g}" for v in self.origin)
+        return (f"Grid(shape={'x'.join(map(str, self.shape))}, spacing={self.spacing:.6g}, "
+                f"origin=({o}))")
 
     @property
     def upper(self) -> np.ndarray:

@@ -13,7 +13,10 @@ from .grid import Grid
 if TYPE_CHECKING:  # trimesh (and SciPy) load in ~0.6 s: only when a Trimesh is asked for
     import trimesh
 
-__all__ = ["crop_to_hull", "extract_mesh", "sample_trilinear", "triangulate", "write_ply"]
+__all__ = [
+    "crop_to_hull", "crop_to_support", "extract_mesh", "sample_trilinear", "triangulate",
+    "write_ply",
+]
 
 
 def sample_trilinear(field: np.ndarray, grid: Grid, points: np.ndarray) -> np.ndarray:
@@ -35,8 +38,9 @@ def sample_trilinear(field: np.ndarray, grid: Grid, points: np.ndarray) -> np.nd
 def triangulate(phi: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate the zero set of ``phi``: vertices (world, float64) and faces facing ``phi > 0``.
 
-    Marching cubes (scikit-image); vertices at the same position (to 1e-8, as trimesh merges
-    them) are merged. scikit-image's winding depends on its ``gradient_direction``; rather
+    Marching cubes (scikit-image); vertices at the same position are merged, compared in grid
+    units (to 1e-6 of a voxel, whatever the scene's units: the result does not depend on
+    them). scikit-image's winding depends on its ``gradient_direction``; rather
     than trust it, the winding is checked against ``phi`` itself: stepping along the face
     normals must increase ``phi`` on most of the area, else every face is flipped. NumPy and
     scikit-image only: importing trimesh costs more than the whole triangulation.
@@ -53,14 +57,14 @@ def triangulate(phi: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
             f"(phi ranges over [{phi.min():.3g}, {phi.max():.3g}])"
         )
     h = grid.spacing
-    verts, faces, _, _ = measure.marching_cubes(phi, level=0.0, spacing=(h, h, h))
-    verts = verts.astype(np.float64) + grid.origin
-    key = np.round(verts * 1e8).astype(np.int64)
+    verts, faces, _, _ = measure.marching_cubes(phi, level=0.0)  # grid units
+    # Keys in millionths of a voxel: any grid Warp can index (< 2^31 nodes) fits in int64.
+    key = np.round(verts.astype(np.float64) * 1e6).astype(np.int64)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)  # keep the vertices in the order they first appear
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
-    verts = verts[first[order]]
+    verts = verts[first[order]].astype(np.float64) * h + grid.origin
     faces = rank[inverse.reshape(-1)][faces].astype(np.int64)
     if len(faces):
         tri = verts[faces]
@@ -90,13 +94,34 @@ def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
 
 
-def write_ply(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
+def write_ply(
+    path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, *,
+    vertex_properties: dict[str, np.ndarray] | None = None,
+) -> None:
     """Write a triangle mesh as binary little-endian PLY (float vertices, int indices).
 
     The layout is the one trimesh writes; the command line uses it for ``.ply`` so that a run
-    need not import trimesh (and SciPy) at all.
+    need not import trimesh at all.
+
+    Args:
+        path: The file to write (overwritten; callers write through a temporary file).
+        vertices: ``(n, 3)`` positions.
+        faces: ``(m, 3)`` vertex indices.
+        vertex_properties: Extra per-vertex float properties (name -> ``(n,)`` array), such
+            as ``support``; written after ``x, y, z`` as ``float``.
     """
-    vertices = np.ascontiguousarray(vertices, dtype="<f4")
+    extra = dict(vertex_properties or {})
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    layout = [("xyz", "<f4", (3,))] + [(name, "<f4") for name in extra]
+    table = np.empty(len(vertices), dtype=layout)
+    table["xyz"] = vertices
+    for name, values in extra.items():
+        values = np.asarray(values, dtype=np.float64).reshape(-1)
+        if len(values) != len(vertices):
+            raise ValueError(f"vertex property {name!r}: {len(values)} values for "
+                             f"{len(vertices)} vertices")
+        with np.errstate(over="ignore"):
+            table[name] = np.minimum(values, np.finfo(np.float32).max)
     faces = np.asarray(faces)
     records = np.empty(len(faces), dtype=[("count", "u1"), ("index", "<i4", (3,))])
     records["count"] = 3
@@ -105,13 +130,38 @@ def write_ply(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) 
         "ply\nformat binary_little_endian 1.0\n"
         f"element vertex {len(vertices)}\n"
         "property float x\nproperty float y\nproperty float z\n"
-        f"element face {len(faces)}\n"
+        + "".join(f"property float {name}\n" for name in extra)
+        + f"element face {len(faces)}\n"
         "property list uchar int vertex_indices\nend_header\n"
     )
     with open(path, "wb") as f:
         f.write(header.encode("ascii"))
-        f.write(vertices.tobytes())
+        f.write(table.tobytes())
         f.write(records.tobytes())
+
+
+def crop_to_support(
+    vertices: np.ndarray, faces: np.ndarray, support: np.ndarray, limit: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Keep the faces whose three vertices lie within ``limit`` voxels of a constraint.
+
+    Returns:
+        The kept vertices, faces (re-indexed) and the vertices' support distances.
+
+    Raises:
+        ReconstructionError: If no face is kept.
+    """
+    faces = np.asarray(faces)
+    near = np.asarray(support) <= limit
+    keep = np.all(near[faces], axis=1) if len(faces) else np.zeros(0, dtype=bool)
+    if not np.any(keep):
+        raise ReconstructionError(f"crop: no face of the mesh lies within {limit:g} voxels of "
+                                  "a constraint")
+    faces = faces[keep]
+    used = np.unique(faces)
+    index = np.full(len(vertices), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    return np.asarray(vertices)[used], index[faces], np.asarray(support)[used]
 
 
 def crop_to_hull(mesh: trimesh.Trimesh, anchors: np.ndarray) -> trimesh.Trimesh:

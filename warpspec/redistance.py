@@ -34,6 +34,10 @@ def _redistancer(
     return Redistancer(shape, spacing, device, method=method, band=band, passes=passes)
 
 
+VOXEL_CLIP = 1e6
+"""|phi| beyond this many voxel widths is clipped before redistancing (only its sign counts)."""
+
+
 def _check_positive(name: str, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise SceneError(f"{name}: must be a positive finite number, got {value!r}")
@@ -98,7 +102,12 @@ def redistance(
     h = _check_positive("spacing", spacing)
     _check_options(method, band, passes)
     dev = resolve_device(device)
-    phi32 = np.ascontiguousarray(arr, dtype=np.float32)
+    # In voxel widths: the distance scales with phi and h together, so the float32 sweeps see
+    # the same numbers whatever the units. Values beyond VOXEL_CLIP voxels only say which side
+    # a node is on (no grid is that wide), so they are clipped rather than overflowing.
+    with np.errstate(over="ignore", under="ignore"):
+        vox = np.clip(arr.astype(np.float64) / h, -VOXEL_CLIP, VOXEL_CLIP)
+    phi32 = np.ascontiguousarray(vox, dtype=np.float32)
     negative = phi32 < 0.0
     if not (negative.any() and not negative.all()) and not np.any(phi32 == 0.0):
         side = "negative (inside)" if negative.all() else "positive (outside)"
@@ -106,10 +115,16 @@ def redistance(
             f"phi: has no zero crossing (every node is {side}); there is no surface to measure "
             "the distance from"
         )
-    rd = _redistancer(arr.shape, h, dev.alias, method, band, int(passes))
+    rd = _redistancer(arr.shape, 1.0, dev.alias, method, band, int(passes))
     field = wp.array(phi32, dtype=float, device=dev, copy=True)
     rd.reinitialize(field)
-    return np.array(field.numpy(), dtype=arr.dtype, copy=True)
+    with np.errstate(over="ignore"):
+        out = np.array(field.numpy().astype(np.float64) * h, dtype=arr.dtype)
+    if not np.all(np.isfinite(out)):
+        raise SceneError(
+            f"spacing: distances of up to {float(np.max(np.abs(field.numpy()))) * h:.3g} do "
+            f"not fit in {arr.dtype}; pass phi as float64 or express it in other units")
+    return out
 
 
 def point_distance(

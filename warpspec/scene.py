@@ -49,6 +49,9 @@ LIGHT_CAMERA = 2
 _LIGHT_CODES = {"directional": LIGHT_DIRECTIONAL, "point": LIGHT_POINT, "camera": LIGHT_CAMERA}
 _LIGHT_KINDS = '"directional", "point" or "camera"'
 
+MAX_SCENE_BYTES = 1024 * 2**20
+"""Largest scene file read (1 GiB: about 15 million points in JSON)."""
+
 # Largest condition number accepted for the left 3x3 block of a projection matrix.
 _MAX_CAMERA_COND = 1e12
 # A directional light closer than this to the ray direction leaves the normal undefined.
@@ -203,6 +206,23 @@ def _float_array(
         i = int(np.argmax(bad))
         raise _error(row(i), f"expected finite numbers, got {_fmt(arr[i])}")
     return arr
+
+
+def _points_fast(rows: Sequence[Any]) -> np.ndarray | None:
+    """Rows of exactly 3 finite JSON numbers as an ``(n, 3)`` array in one pass, else ``None``.
+
+    A million points take a fraction of a second here, against ten seconds row by row; any
+    other input (a bool, a string, a ragged row) returns ``None`` for the row-by-row check.
+    """
+    if not all(type(r) is list and len(r) == 3 for r in rows):
+        return None
+    if not all(type(x) is float or type(x) is int for r in rows for x in r):
+        return None
+    try:
+        arr = np.array(rows, dtype=np.float64)
+    except (OverflowError, ValueError):
+        return None
+    return arr if np.isfinite(arr).all() else None
 
 
 def _camera_indices(value: Any, num_cameras: int) -> np.ndarray:
@@ -647,10 +667,12 @@ class Scene:
             points_data = list(points_data)
         if not isinstance(points_data, list | tuple):
             raise _error("points", f"expected a list of [x, y, z] points, got {_show(points_data)}")
-        points = [
-            _numbers(p, f"points[{i}]", 3, "3 finite numbers [x, y, z]")
-            for i, p in enumerate(points_data)
-        ]
+        points = _points_fast(points_data)
+        if points is None:  # not plain rows of 3 finite numbers: find the bad one and name it
+            points = [
+                _numbers(p, f"points[{i}]", 3, "3 finite numbers [x, y, z]")
+                for i, p in enumerate(points_data)
+            ]
 
         domain_data = data.get("domain")
         domain = None
@@ -712,6 +734,9 @@ class Scene:
 
         """
         where = _path_text(path)
+        from ._atomic import check_size
+
+        check_size(path, MAX_SCENE_BYTES, where)
         try:
             raw = Path(path).read_bytes()
         except FileNotFoundError:
@@ -742,17 +767,22 @@ class Scene:
     def save(self, path: str | os.PathLike) -> None:
         """Write the scene as a JSON file.
 
+        The file is written to a unique temporary file beside it and renamed: a failure (a
+        full disk) leaves a file already at ``path`` as it was.
+
         Args:
-            path: The file; it is overwritten.
+            path: The file; it is replaced.
 
         Raises:
             SceneError: If the file cannot be written.
 
         """
+        from ._atomic import atomic_write
+
         where = _path_text(path)
         text = json.dumps(self.to_dict(), indent=1, allow_nan=False)
         try:
-            Path(path).write_text(text + "\n", encoding="utf-8")
+            atomic_write(path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
         except (OSError, ValueError, TypeError) as exc:
             reason = getattr(exc, "strerror", None) or exc
             raise _error(where, f"cannot write the scene file ({reason})") from None
@@ -1026,6 +1056,13 @@ def _ray_box(
     far = tmax.min(axis=1) if len(tmax) else np.zeros(0)
     hits = near <= far
     return hits, hits & (far >= 0)
+
+
+def rays_meet_box(
+    origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray:
+    """Whether each ray (not its backward half) enters the box ``[lo, hi]``."""
+    return _ray_box(origins, dirs, lo, hi)[1]
 
 
 class _DuplicateKey(Exception):

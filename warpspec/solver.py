@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,9 +19,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import warp as wp
 
+from ._atomic import atomic_write, check_size
 from ._runtime import init, resolve_device
-from .errors import ReconstructionError, SceneError
-from .grid import Grid
+from .errors import InputError, ReconstructionError, SceneError
+from .grid import MAX_NODES, Grid
 from .implicit import ImplicitStart
 from .initial import fit_height_field, plane_frame
 from .kernels.constraints import (
@@ -41,6 +43,7 @@ from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_mea
 from .kernels.redistance import Redistancer
 from .mesh import supported_components, triangulate, write_ply
 from .scene import Scene
+from .verdict import SUPPORT_RADIUS, Verdict, assess
 
 if TYPE_CHECKING:
     import trimesh
@@ -49,8 +52,6 @@ __all__ = ["Reconstructor", "Result", "reconstruct"]
 
 REINIT_BAND = "gradient"
 STARTS = ("implicit", "height", "paper")
-SUPPORT_RADIUS = 3.0
-"""A connected piece of the mesh is kept when it comes this many voxels from a constraint."""
 FULL_REINIT_EVERY = 5
 
 MEASURE_KEYS = (
@@ -67,7 +68,7 @@ MEASURE_KEYS = (
 )
 
 
-@dataclass
+@dataclass(repr=False)
 class Result:
     """What a reconstruction returns.
 
@@ -83,6 +84,9 @@ class Result:
             ``energy_normal``, ``energy_point``, ``energy_smooth``, ``energy_total``,
             ``active``, ``misses``, ``seconds``).
         hits: Ray intersections of the last iteration, ``(M, 3)``; NaN for missed rays.
+        support: Per vertex, the distance to the nearest constraint (a ray's hit or a point)
+            in voxel widths, ``(n,)``; written to PLY as the vertex property ``support``.
+        verdict: Whether the data supports the result (:class:`warpspec.verdict.Verdict`).
     """
 
     vertices: np.ndarray
@@ -91,7 +95,15 @@ class Result:
     grid: Grid
     history: list[dict] = field(default_factory=list)
     hits: np.ndarray | None = None
+    support: np.ndarray | None = None
+    verdict: Verdict | None = None
     _mesh: object = field(default=None, init=False, repr=False, compare=False)
+
+    def __repr__(self) -> str:
+        verdict = "not assessed" if self.verdict is None else (
+            "supported" if self.verdict.supported else "NOT supported")
+        return (f"Result({len(self.vertices)} vertices, {len(self.faces)} faces, "
+                f"{self.grid!r}, {len(self.history)} measures, {verdict})")
 
     @property
     def mesh(self) -> trimesh.Trimesh:
@@ -104,85 +116,209 @@ class Result:
         return self._mesh
 
     def write_mesh(self, path: str | os.PathLike) -> None:
-        """Write the triangulation in the format that ``path``'s extension names.
+        """Write the triangulation in the format that ``path``'s extension names, atomically.
 
-        ``.ply`` is written directly (binary, as trimesh writes it); other formats go through
-        ``trimesh.Trimesh.export``.
+        ``.ply`` is written directly (binary, as trimesh writes it, with the vertex property
+        ``support`` when known); other formats go through ``trimesh.Trimesh.export``.
         """
-        if Path(path).suffix.lower() == ".ply":
-            write_ply(path, self.vertices, self.faces)
+        path = Path(path)
+        if path.suffix.lower() == ".ply":
+            extra = None if self.support is None else {"support": self.support}
+            atomic_write(path, lambda tmp: write_ply(tmp, self.vertices, self.faces,
+                                                     vertex_properties=extra))
         else:
-            self.mesh.export(path)
+            atomic_write(path, lambda tmp: self.mesh.export(tmp, file_type=path.suffix[1:]
+                                                            .lower()))
 
     def constraint_anchors(self, scene: Scene) -> np.ndarray:
         """The ray intersections that hit and the point constraints, stacked ``(n, 3)``."""
         hits = np.empty((0, 3)) if self.hits is None else self.hits
         return np.vstack([hits[np.all(np.isfinite(hits), axis=1)], scene.points.reshape(-1, 3)])
 
+    def assess(self, scene: Scene) -> Verdict:
+        """Compute (again) :attr:`verdict` and :attr:`support` against ``scene``."""
+        normals = None
+        if self.hits is not None and scene.num_specularities:
+            hits = np.asarray(self.hits, dtype=np.float64)
+            ok = np.all(np.isfinite(hits), axis=1)
+            origins, dirs = scene.rays()
+            normals = scene.normals(np.where(ok[:, None], hits, origins + dirs))
+            normals[~ok] = np.nan
+        self.verdict, self.support = assess(
+            phi=self.phi, grid=self.grid, vertices=self.vertices, hits=self.hits,
+            demanded_normals=normals, points=scene.points)
+        return self.verdict
+
     def save_phi(self, path: str | os.PathLike) -> None:
         """Save the level set and its grid to an ``.npz`` file (``Reconstructor(resume=...)``)."""
         save_state(path, self.phi, self.grid)
 
 
+MAX_STATE_BYTES = 4 * 2**30
+"""Largest level-set file :func:`load_state` opens (a 1024^3 float32 level set is 4 GiB)."""
+
+
 def save_state(path: str | os.PathLike, phi: np.ndarray, grid: Grid) -> None:
-    """Write ``phi`` and its grid to ``path`` (NPZ), through a temporary file and a rename."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".part")
-    try:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, phi=phi, origin=grid.origin, spacing=grid.spacing,
-                                shape=np.asarray(grid.shape))
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def load_state(path: str | os.PathLike) -> tuple[np.ndarray, Grid]:
-    """Read a level set saved by :func:`save_state`.
+    """Write ``phi`` and its grid to ``path`` (NPZ), through a unique temporary file and a rename.
 
     Raises:
-        SceneError: If the file is missing, unreadable or not a saved level set.
+        OSError: If it cannot be written; a file already at ``path`` is left as it was.
     """
+    atomic_write(path, lambda tmp: write_state(tmp, phi, grid))
+
+
+def write_state(path: str | os.PathLike, phi: np.ndarray, grid: Grid) -> None:
+    """Write ``phi`` and its grid to ``path`` as NPZ, directly (:func:`save_state` renames)."""
+    with open(path, "wb") as f:
+        np.savez_compressed(f, phi=np.asarray(phi, dtype=np.float32), origin=grid.origin,
+                            spacing=grid.spacing, shape=np.asarray(grid.shape))
+
+
+def _npz_header(archive: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype of one array of an NPZ, read from its header without expanding it."""
+    with archive.open(key + ".npy") as f:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+        else:
+            shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+    return tuple(shape), np.dtype(dtype)
+
+
+def _free_host_memory() -> int | None:
+    """Bytes of physical memory free now, or ``None`` where the system does not say."""
     try:
-        with np.load(path) as data:
-            phi = np.array(data["phi"], dtype=np.float32)
-            grid = Grid(origin=data["origin"], spacing=float(data["spacing"]),
-                        shape=tuple(int(s) for s in data["shape"]))
-    except FileNotFoundError:
-        raise SceneError(f"resume: no such file {str(path)!r}") from None
-    except (OSError, KeyError, ValueError) as exc:
-        raise SceneError(
-            f"resume: {str(path)!r} is not a saved warpspec level set ({exc})"
-        ) from None
-    if phi.shape != grid.shape or not np.all(np.isfinite(phi)):
-        raise SceneError(f"resume: {str(path)!r} holds a level set that does not match its grid")
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def load_state(path: str | os.PathLike, *, max_nodes: int | None = None) -> tuple[np.ndarray, Grid]:
+    """Read a level set saved by :func:`save_state`.
+
+    The file's size, the arrays' declared shapes and the grid are checked before anything is
+    expanded: a small compressed file cannot claim gigabytes.
+
+    Args:
+        path: The ``.npz`` file.
+        max_nodes: Refuse a level set of more nodes (default: :data:`warpspec.grid.MAX_NODES`).
+
+    Raises:
+        InputError: If the file is missing, too large, unreadable or not a saved level set.
+    """
+    if not isinstance(path, str | os.PathLike):
+        raise InputError(f"resume: expected the path of a saved level set, got "
+                         f"{type(path).__name__} {path!r:.60}")
+    where = repr(os.fspath(path))
+    if not os.path.exists(path):
+        raise InputError(f"resume: no such file {where}")
+    if os.path.isdir(path):
+        raise InputError(f"resume: {where} is a folder, expected a .npz file")
+    check_size(path, MAX_STATE_BYTES, "resume")
+    limit = MAX_NODES if max_nodes is None else int(max_nodes)
+    not_state = f"resume: {where} is not a saved warpspec level set"
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+            for key in ("phi", "origin", "spacing", "shape"):
+                if key + ".npy" not in names:
+                    raise InputError(f"{not_state} (no array {key!r}); write one with "
+                                     "--save-phi")
+            headers = {key: _npz_header(archive, key) for key in ("phi", "shape", "origin",
+                                                                  "spacing")}
+            for key, want in (("shape", (3,)), ("origin", (3,)), ("spacing", ())):
+                if headers[key][0] != want or headers[key][1].kind not in "iuf":
+                    raise InputError(f"{not_state} ({key!r} has shape {headers[key][0]})")
+            shape, dtype = headers["phi"]
+            count = math.prod(shape) if shape else 1
+            if len(shape) != 3 or dtype.kind != "f" or count > limit:
+                raise InputError(f"{not_state} or is too large: 'phi' is declared {dtype} of "
+                                 f"shape {shape} (at most {limit:.3g} float values)")
+            need = count * (dtype.itemsize + 4)  # the array as stored, then as float32
+            free = _free_host_memory()
+            if free is not None and need > free:
+                raise InputError(f"resume: {where} holds a level set of shape {shape} that "
+                                 f"needs {need / 2**30:.1f} GiB to read, but only "
+                                 f"{free / 2**30:.1f} GiB of memory is free")
+            member = archive.getinfo("phi.npy")
+            if member.file_size > count * dtype.itemsize + 4096:
+                raise InputError(f"{not_state}: 'phi.npy' expands to {member.file_size} bytes, "
+                                 f"more than its shape {shape} holds")
+            small = {k: np.load(archive.open(k + ".npy")) for k in ("shape", "origin",
+                                                                     "spacing")}
+            grid = Grid(origin=small["origin"], spacing=float(small["spacing"]),
+                        shape=tuple(int(s) for s in small["shape"]))
+            if tuple(shape) != grid.shape:
+                raise InputError(f"resume: {where} holds a level set of shape {shape} on a "
+                                 f"grid of shape {grid.shape}")
+            with np.errstate(all="ignore"):
+                phi = np.array(np.load(archive.open("phi.npy")), dtype=np.float32)
+    except InputError:
+        raise
+    except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile,
+            zipfile.LargeZipFile) as exc:
+        reason = " ".join(str(exc).split())[:120] or type(exc).__name__
+        raise InputError(f"{not_state} ({reason}); write one with --save-phi") from None
+    if not np.all(np.isfinite(phi)):
+        raise InputError(f"resume: {where} holds non-finite values (or values beyond float32)")
     return phi, grid
+
+
+def _check_covers(scene: Scene, grid: Grid, path: str | os.PathLike) -> None:
+    """Refuse a resumed level set whose grid does not hold the scene's constraints.
+
+    Raises:
+        InputError: If a point lies outside the grid, or no specular ray enters it.
+    """
+    from .scene import rays_meet_box
+
+    lo, hi, h = grid.origin, grid.upper, grid.spacing
+    box = f"min={np.round(lo, 6).tolist()} max={np.round(hi, 6).tolist()}"
+    outside = int(np.sum(np.any((scene.points < lo - h) | (scene.points > hi + h), axis=1)))
+    if outside:
+        raise InputError(f"resume: {os.fspath(path)!r} was saved on a grid ({box}) that leaves "
+                         f"{outside} of the scene's {scene.num_points} points outside; resume "
+                         "only with the scene it was saved from")
+    if scene.num_specularities:
+        origins, dirs = scene.rays()
+        if not rays_meet_box(origins, dirs, lo, hi).any():
+            raise InputError(f"resume: {os.fspath(path)!r} was saved on a grid ({box}) that no "
+                             "specular ray of the scene enters; resume only with the scene it "
+                             "was saved from")
+
+
+MAX_ALPHA = 1e4
+"""Largest smoothness weight: the time step shrinks as ``1 / (1 + alpha)``, so beyond this the
+flow does not move in any number of iterations, and ``alpha / h`` nears float32's range."""
+MAX_BULGE = 100.0
+"""Largest ``|bulge|``: the start moves by ``bulge`` times the distance to the nearest point,
+so beyond this it leaves any domain (the paper uses 0.3 and 0.5)."""
 
 
 def _positive_int(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-        raise SceneError(f"{name}: must be a positive integer, got {value!r}")
+        raise InputError(f"{name}: must be a positive integer, got {value!r}")
     return int(value)
 
 
 def _non_negative_int(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-        raise SceneError(f"{name}: must be a non-negative integer, got {value!r}")
+        raise InputError(f"{name}: must be a non-negative integer, got {value!r}")
     return int(value)
 
 
 def _real(name: str, value: object, *, low: float | None = None, strict: bool = False,
           high: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise SceneError(f"{name}: must be a number, got {value!r}")
+        raise InputError(f"{name}: must be a number, got {value!r}")
     v = float(value)
     if not math.isfinite(v):
-        raise SceneError(f"{name}: must be finite, got {value!r}")
+        raise InputError(f"{name}: must be finite, got {value!r}")
     if low is not None and (v <= low if strict else v < low):
         bound = "greater than" if strict else "at least"
-        raise SceneError(f"{name}: must be {bound} {low}, got {value!r}")
+        raise InputError(f"{name}: must be {bound} {low}, got {value!r}")
     if high is not None and v > high:
-        raise SceneError(f"{name}: must be at most {high}, got {value!r}")
+        raise InputError(f"{name}: must be at most {high}, got {value!r}")
     return v
 
 
@@ -272,7 +408,8 @@ class Reconstructor:
         resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used).
 
     Raises:
-        SceneError: If an option is out of range, or the grid would not fit on the device.
+        InputError: If an option is out of range or of the wrong type, the grid would not fit
+            on the device, or ``resume`` is not a level set saved on a grid holding the scene.
     """
 
     def __init__(
@@ -300,10 +437,16 @@ class Reconstructor:
         resume: str | os.PathLike | None = None,
     ) -> None:
         if not isinstance(scene, Scene):
-            raise SceneError(f"scene: expected a warpspec.Scene, got {type(scene).__name__}")
+            raise InputError(f"scene: expected a warpspec.Scene, got {type(scene).__name__}")
+        if resume is not None and not isinstance(resume, str | os.PathLike):
+            raise InputError(f"resume: expected the path of a saved level set, got "
+                             f"{type(resume).__name__} {resume!r:.60}")
+        if grid is not None and not isinstance(grid, Grid):
+            raise InputError(f"grid: expected a warpspec.Grid, got {type(grid).__name__} "
+                             f"{grid!r:.60}")
         self.scene = scene
-        self.alpha = _real("alpha", alpha, low=0.0)
-        self.bulge = _real("bulge", bulge)
+        self.alpha = _real("alpha", alpha, low=0.0, high=MAX_ALPHA)
+        self.bulge = _real("bulge", bulge, low=-MAX_BULGE, high=MAX_BULGE)
         self.bulge_cap = None if bulge_cap is None else _real("bulge_cap", bulge_cap,
                                                                low=0.0, strict=True)
         self.reinit_every = _non_negative_int("reinit_every", reinit_every)
@@ -325,6 +468,7 @@ class Reconstructor:
         resumed = None
         if resume is not None:
             resumed, grid = load_state(resume)
+            _check_covers(scene, grid, resume)
         elif grid is None:
             resolution = _positive_int("resolution", resolution)
             lo, hi = scene.bounds(margin=margin)
@@ -401,7 +545,7 @@ class Reconstructor:
             except (ValueError, OSError, AttributeError):
                 have = None
         if have is not None and need > have:
-            raise SceneError(
+            raise InputError(
                 f"resolution: a {'x'.join(map(str, self.grid.shape))} grid needs about "
                 f"{need / 2**30:.1f} GiB on {self.device.alias} but only {have / 2**30:.1f} GiB "
                 "is free; lower the resolution"
@@ -747,8 +891,10 @@ class Reconstructor:
                              self.scene.points.reshape(-1, 3)])
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing)
-        return Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
-                      history=list(self.history), hits=hits)
+        result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
+                        history=list(self.history), hits=hits)
+        result.assess(self.scene)
+        return result
 
 
 # Device bytes per voxel: phi, its ping-pong twin, the last good phi, G, owner and the narrow
@@ -765,7 +911,11 @@ def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int = 300, **op
         **options: Keyword options of :class:`Reconstructor`.
 
     Returns:
-        The :class:`Result`.
+        The :class:`Result`, with its :attr:`~Result.verdict` and :attr:`~Result.support`.
+
+    Raises:
+        InputError: For a bad option or file (``SceneError`` for a field of the scene).
+        ReconstructionError: If the run fails (a non-finite level set, no surface).
     """
     init()
     if not isinstance(scene, Scene):
