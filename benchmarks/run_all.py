@@ -168,7 +168,7 @@ def _redistance_row(stdout: str, size: int = 128) -> dict | None:
     for line in stdout.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if len(cells) >= 5 and cells[0] == f"{size}^3" and cells[1].startswith("warpspec") \
-                and "band=gradient" in cells[1]:
+                and "band=gradient" in cells[1] and "cap=" not in cells[1]:
             try:
                 return {"method": cells[1], "seconds": float(cells[2]),
                         "speedup": float(cells[3].rstrip("x")), "band_error": float(cells[4])}

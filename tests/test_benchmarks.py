@@ -112,7 +112,8 @@ def test_run_all_checks_the_targets():
         "iteration": {"results": {"rows": [{"size": 128, "numpy_s": 1.0, "iteration_s": 0.1}]}},
         "redistance": {"returncode": 0, "stdout": (
             "| 128^3 | skfmm order 1 | 2.900 | 1.0x | 0.340 | 1.00 | 0.4 |\n"
-            "| 128^3 | warpspec cpu band=gradient | 0.250 | 11.6x | 0.070 | 0.21 | 0.1 |\n")},
+            "| 128^3 | warpspec cpu band=gradient | 0.250 | 11.6x | 0.070 | 0.21 | 0.1 |\n"
+            "| 128^3 | warpspec cpu band=gradient cap=6h | 0.050 | 58.0x | 0.20 | 0.6 | 0.5 |\n")},
         "octant": {"results": {"rows": [
             {"runner": "cli", "cache": "cold (empty cache)", "wall_s": 25.0, "cpu_s": 20.0},
             {"runner": "cli", "cache": "warm (same cache)", "wall_s": 4.0, "cpu_s": 3.0}]}},
@@ -126,3 +127,17 @@ def test_run_all_checks_the_targets():
     assert verdicts["octant cli, cold (empty cache): <= 20 s"] == "**not met**"
     assert verdicts["octant cli, warm (same cache): <= 5 s"] == "met"
     assert verdicts["peak device memory at 128^3 <= 40 B/voxel"] == "**not met**"
+
+
+def test_bench_redistance_smoke_prints_full_and_capped_rows():
+    import subprocess
+
+    out = subprocess.run([sys.executable, str(BENCH / "bench_redistance.py"), "--smoke"],
+                         capture_output=True, text=True, timeout=300, check=True).stdout
+    rows = table_rows(out, "24^3")
+    names = [row.split("|")[2].strip() for row in rows]
+    assert "skfmm order 1" in names and "skfmm order 1 narrow=6h" in names
+    assert "warpspec cpu band=gradient cap=6h" in names
+    # the capped distance is as good as the full one within 3 h of the sphere
+    err = {row.split("|")[2].strip(): float(row.split("|")[5]) for row in rows}
+    assert err["warpspec cpu band=gradient cap=6h"] == err["warpspec cpu band=gradient"] < 0.3

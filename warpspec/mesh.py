@@ -12,9 +12,16 @@ from .grid import Grid
 
 if TYPE_CHECKING:  # trimesh (and SciPy) load in ~0.6 s: only when a Trimesh is asked for
     import trimesh
+    import warp as wp
 
 __all__ = [
-    "crop_to_hull", "crop_to_support", "extract_mesh", "sample_trilinear", "triangulate",
+    "crop_to_hull",
+    "crop_to_support",
+    "extract_mesh",
+    "sample_trilinear",
+    "supported_components",
+    "triangulate",
+    "triangulate_device",
     "write_ply",
 ]
 
@@ -78,6 +85,90 @@ def triangulate(phi: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
         if np.sum(np.sign(rise) * area) < 0:
             faces = faces[:, ::-1].copy()
     return verts, faces
+
+
+def triangulate_device(
+    phi: wp.array,
+    grid: Grid,
+    *,
+    band: wp.array | None = None,
+    count: wp.array | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate the zero set of a device level set with marching cubes run on its device.
+
+    The same surface as :func:`triangulate` (vertices at the linear zero crossings of the grid
+    edges, faces toward ``phi > 0``) without copying the grid to the host: one vertex per
+    crossing edge, shared by the faces around it (no merging by position), so a closed
+    surface comes out watertight. With ``band`` only the cells whose origin node is in the
+    band are visited; the band must hold every node within one cell of the zero set (a
+    narrow band of 2 voxel widths or more around a distance function does).
+
+    Args:
+        phi: Level set, float32 ``wp.array3d`` of ``grid.shape`` on any device.
+        grid: Its grid (origin, spacing).
+        band: Optional narrow band, as :func:`~warpspec.kernels.differences.build_band`
+            encodes it (on the same device); ``count`` must come with it.
+        count: One int on the device: how many entries of ``band`` are valid.
+
+    Returns:
+        Vertices (world, float64, shape ``(V, 3)``) and faces (int64, shape ``(F, 3)``).
+
+    Raises:
+        ReconstructionError: If there is no zero crossing, or the band misses a node of a
+            cell that the surface crosses.
+        SceneError: If ``phi`` does not match ``grid`` or ``band`` comes without ``count``.
+    """
+    import warp as wp
+
+    from .errors import SceneError
+    from .kernels import marching
+
+    if not isinstance(phi, wp.array) or phi.ndim != 3 or phi.dtype != wp.float32:
+        raise SceneError("phi: must be a float32 wp.array3d; for NumPy use triangulate()")
+    if tuple(phi.shape) != tuple(grid.shape):
+        raise SceneError(f"phi: shape {tuple(phi.shape)} does not match the grid {grid.shape}")
+    if (band is None) != (count is None):
+        raise SceneError("band: band and count must be given together")
+    device = phi.device
+    use_band = 0 if band is None else 1
+    if band is None:
+        band = wp.empty(0, dtype=int, device=device)
+        count = wp.zeros(1, dtype=int, device=device)
+        threads = grid.size
+    else:
+        threads = int(band.shape[0])
+    tab = marching.tables(device)
+    totals = wp.zeros(2, dtype=wp.int32, device=device)
+    common = [band, count, use_band]
+    wp.launch(marching.count_kernel, dim=threads, inputs=[phi, tab, *common],
+              outputs=[totals], device=device)
+    n_edges, n_faces = (int(v) for v in totals.numpy())
+    if n_faces == 0:
+        raise ReconstructionError("the zero set of phi does not cross the domain: there is no "
+                                  "surface to mesh")
+    edge_slot = wp.full((*grid.shape, 3), -1, dtype=wp.int32, device=device)
+    edge_node = wp.empty(n_edges, dtype=wp.vec3i, device=device)
+    edge_axis = wp.empty(n_edges, dtype=wp.int32, device=device)
+    edge_t = wp.empty(n_edges, dtype=float, device=device)
+    totals.zero_()
+    wp.launch(marching.vertices_kernel, dim=threads, inputs=[phi, *common, totals],
+              outputs=[edge_slot, edge_node, edge_axis, edge_t], device=device)
+    faces = wp.empty((n_faces, 3), dtype=wp.int32, device=device)
+    missing = wp.zeros(1, dtype=wp.int32, device=device)
+    wp.launch(marching.faces_kernel, dim=threads,
+              inputs=[phi, tab, *common, edge_slot, totals[1:], missing],
+              outputs=[faces], device=device)
+    lost = int(missing.numpy()[0])
+    if lost:
+        raise ReconstructionError(
+            f"band: {lost} triangles cross edges whose nodes are not in the band; widen the "
+            "band to at least 2 voxel widths"
+        )
+    # world positions in float64 on the host: O(surface), exact to the float32 crossing
+    node = edge_node.numpy().astype(np.float64)
+    node[np.arange(n_edges), edge_axis.numpy()] += edge_t.numpy()
+    verts = grid.origin + grid.spacing * node
+    return verts, faces.numpy().astype(np.int64)
 
 
 def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:

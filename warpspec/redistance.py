@@ -64,6 +64,7 @@ def redistance(
     method: str = "auto",
     band: str = "gradient",
     passes: int = 1,
+    cap: float | None = None,
 ) -> np.ndarray:
     """Return the signed distance function with the same zero set as ``phi``.
 
@@ -84,6 +85,10 @@ def redistance(
             sphere at 64^3) or ``"axis"`` (the linear zero crossings along each axis combined
             as ``1 / sqrt(sum 1 / d_axis^2)``, as in scikit-fmm; about 0.35 h).
         passes: How many times the 8 sweeps are repeated (1 is enough for a distance).
+        cap: If given (positive, world units), distances are computed only up to it and the
+            farther nodes read ``+-cap``: the result is exactly ``sign(phi) * min(|d|, cap)``,
+            and the sweeps visit only the nodes within ``cap`` of the zero set (at 128^3, a
+            cap of a few voxels saves most of the time).
 
     Returns:
         A new array, same shape and float dtype as ``phi``.
@@ -101,6 +106,8 @@ def redistance(
         raise SceneError(f"phi: must be finite, found {int(np.sum(~np.isfinite(arr)))} NaN/inf")
     h = _check_positive("spacing", spacing)
     _check_options(method, band, passes)
+    if cap is not None:
+        cap = _check_positive("cap", cap)
     dev = resolve_device(device)
     # In voxel widths: the distance scales with phi and h together, so the float32 sweeps see
     # the same numbers whatever the units. Values beyond VOXEL_CLIP voxels only say which side
@@ -117,7 +124,7 @@ def redistance(
         )
     rd = _redistancer(arr.shape, 1.0, dev.alias, method, band, int(passes))
     field = wp.array(phi32, dtype=float, device=dev, copy=True)
-    rd.reinitialize(field)
+    rd.reinitialize(field, cap=None if cap is None else cap / h)
     with np.errstate(over="ignore"):
         out = np.array(field.numpy().astype(np.float64) * h, dtype=arr.dtype)
     if not np.all(np.isfinite(out)):

@@ -89,28 +89,14 @@ def _mark(flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
 
 
 @wp.func
-def _visit_distance(d: wp.array3d[float], flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
-    """Godunov update of |grad d| = 1 (h = 1) at one node; wake the neighbours it may lower.
+def _godunov(a: float, b: float, c: float, old: float) -> float:
+    """Godunov solution of |grad d| = 1 (h = 1) from the smaller neighbour on each axis.
 
-    The 6 axis neighbours are clamped at the border (the same as one-sided there). A neighbour
-    whose value is not above the new one cannot use it as an upwind value, so it is not woken.
+    Returns ``old`` at once if no update can lower it: the update is at least the smallest
+    neighbour + 1/sqrt(3).
     """
-    nx = d.shape[0]
-    ny = d.shape[1]
-    nz = d.shape[2]
-    xm = d[wp.max(i - 1, 0), j, k]
-    xp = d[wp.min(i + 1, nx - 1), j, k]
-    ym = d[i, wp.max(j - 1, 0), k]
-    yp = d[i, wp.min(j + 1, ny - 1), k]
-    zm = d[i, j, wp.max(k - 1, 0)]
-    zp = d[i, j, wp.min(k + 1, nz - 1)]
-    old = d[i, j, k]
-    a = wp.min(xm, xp)
-    b = wp.min(ym, yp)
-    c = wp.min(zm, zp)
-    # the update is at least min + 1/sqrt(3): nothing to do if that is not below the value
     if wp.min(a, wp.min(b, c)) + 0.5773 >= old:
-        return
+        return old
     # sort a <= b <= c
     if a > b:
         t = a
@@ -133,7 +119,27 @@ def _visit_distance(d: wp.array3d[float], flags: wp.array3d[wp.uint8], i: int, j
         if u > c:
             s = b + c
             u = (s + wp.sqrt(wp.max(s * s - 3.0 * (b * b + c * c - 1.0), 0.0))) / 3.0
-    u = a + u
+    return a + u
+
+
+@wp.func
+def _visit_distance(d: wp.array3d[float], flags: wp.array3d[wp.uint8], i: int, j: int, k: int):
+    """Godunov update of |grad d| = 1 (h = 1) at one node; wake the neighbours it may lower.
+
+    The 6 axis neighbours are clamped at the border (the same as one-sided there). A neighbour
+    whose value is not above the new one cannot use it as an upwind value, so it is not woken.
+    """
+    nx = d.shape[0]
+    ny = d.shape[1]
+    nz = d.shape[2]
+    xm = d[wp.max(i - 1, 0), j, k]
+    xp = d[wp.min(i + 1, nx - 1), j, k]
+    ym = d[i, wp.max(j - 1, 0), k]
+    yp = d[i, wp.min(j + 1, ny - 1), k]
+    zm = d[i, j, wp.max(k - 1, 0)]
+    zp = d[i, j, wp.min(k + 1, nz - 1)]
+    old = d[i, j, k]
+    u = _godunov(wp.min(xm, xp), wp.min(ym, yp), wp.min(zm, zp), old)
     if u < old:
         d[i, j, k] = u
         if i > 0 and xm > u:
@@ -290,11 +296,16 @@ def init_band_kernel(
     phi: wp.array3d[float],
     mode: int,
     chunk: int,
+    cap: float,
     d: wp.array3d[float],
     flags: wp.array3d[wp.uint8],
     count: wp.array[wp.int32],
 ):
-    """Freeze the nodes next to a sign change at their distance (index units); BIG elsewhere."""
+    """Freeze the nodes next to a sign change at their distance (index units); ``cap`` elsewhere.
+
+    No node is marked active here: :func:`activate_front_kernel` wakes the neighbours of the
+    frozen nodes, the only ones that the first sweep can change.
+    """
     i, j, kb = wp.tid()
     frozen = wp.int32(0)
     for c in range(chunk):
@@ -308,11 +319,132 @@ def init_band_kernel(
                 f = f + _FROZEN
                 frozen = frozen + 1
             else:
-                f = f + _ACTIVE
+                dist = cap
             d[i, j, k] = dist
             flags[i, j, k] = wp.uint8(f)
     if frozen > 0:
         wp.atomic_add(count, 0, frozen)
+
+
+@wp.func
+def _is_frozen(flags: wp.array3d[wp.uint8], i: int, j: int, k: int) -> int:
+    return int(flags[i, j, k]) & _FROZEN
+
+
+@wp.kernel
+def activate_front_kernel(chunk: int, flags: wp.array3d[wp.uint8], rows: wp.array2d[wp.uint8]):
+    """Mark active the unfrozen nodes with a frozen axis neighbour, and their rows ``(i, j)``.
+
+    Every other node starts at the same value as all its neighbours, so its first update could
+    not lower it: waking only this front gives the sweeps exactly the same updates.
+    """
+    i, j, kb = wp.tid()
+    nx = flags.shape[0]
+    ny = flags.shape[1]
+    nz = flags.shape[2]
+    any_active = int(0)
+    for c in range(chunk):
+        k = kb * chunk + c
+        if k < nz:
+            f = int(flags[i, j, k])
+            if (f & _FROZEN) == 0:
+                near = _is_frozen(flags, wp.max(i - 1, 0), j, k)
+                near = near | _is_frozen(flags, wp.min(i + 1, nx - 1), j, k)
+                near = near | _is_frozen(flags, i, wp.max(j - 1, 0), k)
+                near = near | _is_frozen(flags, i, wp.min(j + 1, ny - 1), k)
+                near = near | _is_frozen(flags, i, j, wp.max(k - 1, 0))
+                near = near | _is_frozen(flags, i, j, wp.min(k + 1, nz - 1))
+                if near != 0:
+                    flags[i, j, k] = wp.uint8(f + _ACTIVE)
+                    any_active = 1
+    if any_active != 0:
+        rows[i, j] = wp.uint8(1)
+
+
+@wp.func
+def _wake(flags: wp.array[wp.uint8], rows: wp.array[wp.uint8], t: int, r: int):
+    """Mark flat node ``t`` active and its row ``r`` as holding an active node."""
+    flags[t] = flags[t] | wp.uint8(_ACTIVE)
+    rows[r] = wp.uint8(1)
+
+
+@wp.kernel
+def serial_sweep_kernel(
+    d: wp.array[float],
+    flags: wp.array[wp.uint8],
+    rows: wp.array[wp.uint8],
+    shape: wp.vec3i,
+    passes: int,
+):
+    """The 8 Gauss-Seidel sweeps of the distance, ``passes`` times, in one thread (the CPU).
+
+    The same updates in the same order as :func:`sweep_kernel` (so the same numbers) on
+    flattened arrays: a neighbour is an offset (no index arithmetic per read), and a row
+    ``(i, j)`` whose ``rows`` byte is clear holds no active node and is skipped whole.
+    """
+    nx = shape[0]
+    ny = shape[1]
+    nz = shape[2]
+    sx = ny * nz
+    for step in range(8 * passes):
+        o = step % 8
+        for a in range(nx):
+            i = a
+            if o & 1:
+                i = nx - 1 - a
+            for b in range(ny):
+                j = b
+                if o & 2:
+                    j = ny - 1 - b
+                r = i * ny + j
+                if rows[r] == wp.uint8(0):
+                    continue
+                rows[r] = wp.uint8(0)
+                base = r * nz
+                for c in range(nz):
+                    k = c
+                    if o & 4:
+                        k = nz - 1 - c
+                    t = base + k
+                    f = int(flags[t])
+                    if (f & (_ACTIVE + _FROZEN)) != _ACTIVE:
+                        continue
+                    flags[t] = wp.uint8(f - _ACTIVE)
+                    old = d[t]
+                    # clamped neighbours: the node itself at the border
+                    xm = old
+                    if i > 0:
+                        xm = d[t - sx]
+                    xp = old
+                    if i < nx - 1:
+                        xp = d[t + sx]
+                    ym = old
+                    if j > 0:
+                        ym = d[t - nz]
+                    yp = old
+                    if j < ny - 1:
+                        yp = d[t + nz]
+                    zm = old
+                    if k > 0:
+                        zm = d[t - 1]
+                    zp = old
+                    if k < nz - 1:
+                        zp = d[t + 1]
+                    u = _godunov(wp.min(xm, xp), wp.min(ym, yp), wp.min(zm, zp), old)
+                    if u < old:
+                        d[t] = u
+                        if i > 0 and xm > u:
+                            _wake(flags, rows, t - sx, r - ny)
+                        if i < nx - 1 and xp > u:
+                            _wake(flags, rows, t + sx, r + ny)
+                        if j > 0 and ym > u:
+                            _wake(flags, rows, t - nz, r - 1)
+                        if j < ny - 1 and yp > u:
+                            _wake(flags, rows, t + nz, r + 1)
+                        if k > 0 and zm > u:
+                            _wake(flags, rows, t - 1, r)
+                        if k < nz - 1 and zp > u:
+                            _wake(flags, rows, t + 1, r)
 
 
 @wp.kernel
@@ -581,6 +713,8 @@ class Redistancer:
         """Scratch: unsigned distance in index units."""
         self.flags = wp.empty(shape, dtype=wp.uint8, device=self.device)
         """Scratch: inside, frozen and active bits per node."""
+        self._active_rows = wp.zeros(shape[:2], dtype=wp.uint8, device=self.device)
+        # per row (i, j): may hold an active node (the serial distance sweeps skip the others)
         self.band_count = wp.zeros(1, dtype=wp.int32, device=self.device)
         """Number of band nodes found by the last :meth:`reinitialize` (0: no zero crossing)."""
         # the nearest-point index of point_distance shares the memory of `distance`
@@ -631,6 +765,15 @@ class Redistancer:
 
     def _sweep(self, pts: PointSet) -> None:
         mode = 0 if pts is self._no_points else 1
+        if self.method == "serial" and mode == 0:
+            wp.launch(
+                serial_sweep_kernel,
+                dim=1,
+                inputs=[self.distance.flatten(), self.flags.flatten(),
+                        self._active_rows.flatten(), wp.vec3i(*self.shape), self.passes],
+                device=self.device,
+            )
+            return
         if self.method == "serial":
             wp.launch(
                 sweep_kernel,
@@ -649,7 +792,7 @@ class Redistancer:
             for launch in self._plane_launches:
                 launch.launch()
 
-    def reinitialize(self, phi: wp.array3d) -> wp.array:
+    def reinitialize(self, phi: wp.array3d, *, cap: float | None = None) -> wp.array:
         """Reset ``phi`` in place to the signed distance to its zero set.
 
         The nodes next to a sign change (along any axis) get their distance from the band
@@ -658,23 +801,45 @@ class Redistancer:
         sign change and no zero, there is nothing to measure from: ``phi`` is left unchanged
         and the returned counter reads 0.
 
+        With ``cap`` the unknown nodes start at ``cap`` voxel widths instead of "far": the
+        result is then exactly ``sign(phi) * min(d, cap * h)`` (a node's Godunov value depends
+        only on neighbours with smaller values, so capping changes nothing below the cap), and
+        the sweeps touch only the nodes within ``cap`` of the zero set. Use it when nothing
+        reads the far field's distances (a narrow-band solver reads only their sign).
+
         Args:
             phi: Level set of shape ``shape``, float32, on this device.
+            cap: Largest distance computed, in voxel widths (positive); ``None``: no cap.
 
         Returns:
             :attr:`band_count`, a device array of one int32: the number of band nodes, 0 when
             ``phi`` had no zero crossing. Reading it (``.numpy()``) synchronises.
 
         Raises:
-            SceneError: If ``phi`` does not have this shape, device and dtype.
+            SceneError: If ``phi`` does not have this shape, device and dtype, or ``cap`` is
+                not positive.
         """
         self._check(phi, "phi")
+        if cap is None:
+            start = float(BIG)
+        elif cap > 0.0:
+            start = float(cap)
+        else:
+            raise SceneError(f"cap: must be a positive number of voxel widths, got {cap!r}")
         self.band_count.zero_()
+        self._active_rows.zero_()
         wp.launch(
             init_band_kernel,
             dim=self._rows,
-            inputs=[phi, BAND_MODES[self.band], self._chunk],
+            inputs=[phi, BAND_MODES[self.band], self._chunk, start],
             outputs=[self.distance, self.flags, self.band_count],
+            device=self.device,
+        )
+        wp.launch(
+            activate_front_kernel,
+            dim=self._rows,
+            inputs=[self._chunk],
+            outputs=[self.flags, self._active_rows],
             device=self.device,
         )
         self._sweep(self._no_points)
