@@ -6,6 +6,7 @@ obey the law of reflection.
 """
 
 from .colmap import load_colmap
+from .detect import detect_highlights
 from .errors import ReconstructionError, SceneError
 from .grid import Grid
 from .redistance import point_distance, redistance
@@ -24,6 +25,7 @@ __all__ = [
     "SceneError",
     "SceneWarning",
     "__version__",
+    "detect_highlights",
     "load_colmap",
     "point_distance",
     "reconstruct",
