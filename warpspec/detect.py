@@ -7,9 +7,9 @@ near the sensor's saturation. :func:`detect_highlights` works on the luminance o
 
 1. background: the grey opening (scikit-image ``opening`` with ``disk(radius)``) of the image
    smoothed by a Gaussian of 0.7 px (sensor noise);
-2. candidates: connected regions (scikit-image ``label``) where the smoothed image is at least
-   ``min_peak`` of full scale and stands at least ``min_contrast`` above the background;
-   regions larger than the disc are not highlights (bright texture, a lamp, a window);
+2. candidates: connected regions (scikit-image ``label``) where the smoothed image stands at
+   least ``min_contrast`` above the background and whose brightest pixel reaches ``min_peak``
+   of full scale; regions larger than the disc are not highlights (bright texture, a lamp);
 3. centre: each candidate grows to the connected region where the image stands more than
    ``0.3 * min_contrast`` above the background, and its centre is the weighted centroid
    (scikit-image ``regionprops``) of the raw image minus background minus that level, so a
@@ -166,7 +166,7 @@ def detect_highlights(
     Args:
         image: The photograph: ``(H, W)`` grey or ``(H, W, 3|4)`` colour; 8-bit, 16-bit, or
             float with 1 as full scale.
-        min_peak: Least brightness of a highlight (smoothed), as a fraction of full scale.
+        min_peak: Least brightness of a highlight's brightest pixel, a fraction of full scale.
         min_contrast: Least height above the local background, as a fraction of full scale.
         radius: Radius in pixels of the disc that estimates the background; a highlight must
             fit inside it. Default ``max(4, 0.02 * min(H, W))``.
@@ -206,7 +206,7 @@ def detect_highlights(
     smooth = gaussian(grey, sigma=0.7, preserve_range=True)
     background = opening(smooth, footprint)
     above = smooth - background
-    strong = (smooth >= min_peak) & (above >= min_contrast)
+    strong = above >= min_contrast
     if not strong.any():
         return np.zeros((0, 5))
     seeds = label(strong, connectivity=2)
@@ -217,7 +217,9 @@ def detect_highlights(
     rows = []
     seen: set[int] = set()
     for region in regionprops(seeds):
-        r, c = region.coords[np.argmax(smooth[region.coords[:, 0], region.coords[:, 1]])]
+        r, c = region.coords[np.argmax(grey[region.coords[:, 0], region.coords[:, 1]])]
+        if grey[r, c] < min_peak:
+            continue  # bright, but not near saturation: texture
         g = int(grown[r, c])
         if g == 0 or g in seen:
             continue

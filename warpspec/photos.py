@@ -301,6 +301,13 @@ def render_photos(
         return seen
 
     oseen = observations(opts)
+    # A feature under a saturated highlight cannot be matched: no observation within 3 px.
+    pix = scale * (synthetic.clean_pixels + 0.5)
+    cams = synthetic.camera_indices
+    for c, q in zip(cams, pix, strict=True):
+        h = opts @ matrices[c][:, :3].T + matrices[c][:, 3]
+        near = np.linalg.norm(h[:, :2] / h[:, 2:3] - q, axis=1) < 3.0
+        oseen[c] &= ~near
     keep = oseen.sum(axis=0) >= 2
     opts, oseen = opts[keep], oseen[:, keep]
     bseen = observations(bcand)
@@ -392,8 +399,6 @@ def render_photos(
                 errors, tracks, binary=True, text=True)
 
     # The truth.
-    pix = scale * (synthetic.clean_pixels + 0.5)
-    cams = synthetic.camera_indices
     with open(out / "highlights_true.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["image", "u", "v"])
