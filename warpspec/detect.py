@@ -13,7 +13,8 @@ near the sensor's saturation. :func:`detect_highlights` works on the luminance o
 3. centre: each candidate grows to the connected region where the image stands more than
    ``0.3 * min_contrast`` above the background, and its centre is the weighted centroid
    (scikit-image ``regionprops``) of the raw image minus background minus that level, so a
-   clipped plateau and its shoulders both count, symmetrically;
+   clipped plateau and its shoulders both count, symmetrically; a region cut by the image's
+   border is dropped (its centre is unknown);
 4. texture: a candidate within ``exclude_radius`` pixels of a point given in ``exclude`` (the
    projections of the COLMAP 3D points seen in that image, see :func:`model_points`) is a
    tracked feature, not a highlight: a highlight moves with the viewpoint, so SfM does not
@@ -214,8 +215,9 @@ def detect_highlights(
     weight = grey - background - level
     grown = label(weight > 0, connectivity=2)
     max_area = float(footprint.sum())
+    rim = np.concatenate([grown[0], grown[-1], grown[:, 0], grown[:, -1]])
+    seen: set[int] = set(int(g) for g in np.unique(rim))  # cut by the border: no centre
     rows = []
-    seen: set[int] = set()
     for region in regionprops(seeds):
         r, c = region.coords[np.argmax(grey[region.coords[:, 0], region.coords[:, 1]])]
         if grey[r, c] < min_peak:
