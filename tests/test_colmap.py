@@ -121,7 +121,8 @@ def model(tmp_path):
 def test_rays_of_the_imported_scene_pass_through_the_specular_points(tmp_path, camera_model):
     folder = tmp_path / camera_model
     centres, _, order = write_model(folder, model=camera_model)
-    scene = load_colmap(folder, folder / "highlights.csv", light="camera")
+    # points="all": the default keeps only the points near where the rays meet.
+    scene = load_colmap(folder, folder / "highlights.csv", light="camera", points="all")
     assert scene.num_cameras == 4
     np.testing.assert_allclose(scene.camera_centres(), centres, atol=1e-9)
     # Highlight k was written for the k-th image in file order; the camera is its rank by id.
@@ -179,12 +180,14 @@ def test_highlights_may_name_images_by_base_name(tmp_path):
 def test_point_selection(model):
     csv = model / "highlights.csv"
     assert load_colmap(model, csv, light="camera", points="none").num_points == 0
-    best = load_colmap(model, csv, light="camera", max_points=2)
+    # points="all" where the test is about the other options, not the automatic choice.
+    best = load_colmap(model, csv, light="camera", points="all", max_points=2)
     np.testing.assert_array_equal(best.points, POINTS[[1, 3]])  # errors 0.2 and 0.1
     chosen = import_colmap(model, csv, light="camera", points=[14, 10])
     assert chosen.point_ids == (10, 14)
     with pytest.warns(ws.SceneWarning, match="dropped 1 of 5 points outside the domain"):
-        boxed = load_colmap(model, csv, light="camera", domain=([-2, -2, -2], [2, 2, 2]))
+        boxed = load_colmap(model, csv, light="camera", points="all",
+                            domain=([-2, -2, -2], [2, 2, 2]))
     assert boxed.num_points == 4
     assert boxed.domain is not None
 
@@ -202,22 +205,54 @@ def test_lights_from_specs():
             parse_light(bad, field="--light")
 
 
-def test_lens_distortion_is_ignored_with_a_warning_that_says_how_much(tmp_path):
+def test_distorted_highlights_are_undistorted_onto_the_specular_points(tmp_path):
+    # Lens distortion used to be ignored with a warning; the highlights are now undistorted.
     folder = tmp_path / "opencv"
     write_model(folder, model="OPENCV")
-    with pytest.warns(ws.SceneWarning) as record:
-        load_colmap(folder, folder / "highlights.csv", light="camera")
-    messages = sorted(str(w.message) for w in record)
-    assert len(messages) == 2  # one per camera with highlights
-    for line, message in zip((4, 5), messages, strict=True):
-        assert re.search(rf"cameras.txt:{line}: camera {line - 3} is OPENCV \(k1=-0.1, .*\); its "
-                         r"lens distortion is ignored, which moves its highlights by up to "
-                         r"\d+\.\d\d px", message), message
-    folder = tmp_path / "radial"
-    write_model(folder, model="RADIAL")  # zero coefficients: nothing to say
+    camera = ColmapCamera(1, "OPENCV", WIDTH, HEIGHT, tuple(intrinsics("OPENCV")))
+    csv = folder / "highlights.csv"
+    rows = csv.read_text().splitlines()
+    out = [rows[0]]
+    for row in rows[1:]:
+        name, u, v = row.split(",")
+        (du, dv), = camera.distort([[float(u), float(v)]])
+        # Ignored, a shift of 1e-3 px would leave the ray 5e-6 from its point (depth 4, f 800).
+        assert math.hypot(du - float(u), dv - float(v)) > 1e-3
+        out.append(f"{name},{float(du)!r},{float(dv)!r}")
+    csv.write_text("\n".join(out) + "\n")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        load_colmap(folder, folder / "highlights.csv", light="camera")
+        scene = load_colmap(folder, csv, light="camera")
+    dist, _ = distance_to_rays(scene, SPECULAR)
+    assert np.all(dist < 1e-9), dist
+
+
+@pytest.mark.parametrize("model", ["SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV"])
+def test_undistort_inverts_distort(model):
+    params = {"SIMPLE_RADIAL": (500.0, 320.0, 240.0, -0.12),
+              "RADIAL": (500.0, 320.0, 240.0, -0.1, 0.02),
+              "OPENCV": (500.0, 510.0, 320.0, 240.0, -0.1, 0.01, 0.001, -0.002),
+              "FULL_OPENCV": (500.0, 510.0, 320.0, 240.0, -0.1, 0.01, 0.001, -0.002, 0.001,
+                              0.05, 0.001, 0.0005)}[model]
+    cam = ColmapCamera(1, model, 640, 480, params)
+    grid = np.stack(np.meshgrid(np.linspace(0, 640, 9), np.linspace(0, 480, 7)), -1)
+    ideal = grid.reshape(-1, 2)
+    back, ok = cam.undistort(cam.distort(ideal))
+    assert ok.all()
+    np.testing.assert_allclose(back, ideal, atol=1e-7)
+
+
+def test_full_opencv_distortion_follows_colmap():
+    p = (400.0, 410.0, 300.0, 200.0, 0.1, -0.02, 0.003, 0.001, 0.004, 0.2, -0.01, 0.002)
+    cam = ColmapCamera(1, "FULL_OPENCV", 600, 400, p)
+    x, y = 0.3, -0.25
+    r2 = x * x + y * y
+    radial = (1 + 0.1 * r2 - 0.02 * r2**2 + 0.004 * r2**3) / (1 + 0.2 * r2 - 0.01 * r2**2
+                                                                + 0.002 * r2**3)
+    xd = x * radial + 2 * 0.003 * x * y + 0.001 * (r2 + 2 * x * x)
+    yd = y * radial + 2 * 0.001 * x * y + 0.003 * (r2 + 2 * y * y)
+    np.testing.assert_allclose(cam.distort([[300 + 400 * x, 200 + 410 * y]]),
+                               [[300 + 400 * xd, 200 + 410 * yd]], rtol=1e-14)
 
 
 def test_distortion_of_a_radial_camera_follows_colmap():

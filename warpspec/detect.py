@@ -12,7 +12,7 @@ near the sensor's saturation. :func:`detect_highlights` works on the luminance o
    of full scale; regions larger than the disc are not highlights (bright texture, a lamp);
 3. centre: each candidate grows to the connected region where the image stands more than
    ``0.3 * min_contrast`` above the background, and its centre is the weighted centroid
-   (scikit-image ``regionprops``) of the raw image minus background minus that level, so a
+   (label-wise sums) of the raw image minus background minus that level, so a
    clipped plateau and its shoulders both count, symmetrically; a region cut by the image's
    border is dropped (its centre is unknown);
 4. texture: a candidate within ``exclude_radius`` pixels of a point given in ``exclude`` (the
