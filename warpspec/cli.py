@@ -410,7 +410,20 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     photos = find_images(args.images)
     if any(path.resolve() == out.resolve() for _, path in photos):
         raise SceneError(f"--output: {out} is one of the photographs; name another file")
-    observed = None if args.model is None else model_points(args.model)
+    model = args.model
+    if args.sfm is not None:
+        if model is not None:
+            raise SceneError("--sfm: give either --model (an existing COLMAP model) or --sfm "
+                             "(make one), not both")
+        folders = [p for p in args.images if Path(p).is_dir()]
+        if len(folders) != 1 or len(args.images) != 1:
+            raise SceneError("--sfm: give exactly one folder of photographs")
+        from .photos import run_sfm
+
+        model = run_sfm(folders[0], args.sfm)
+        if not args.quiet:
+            _say(f"structure from motion: model in {model}")
+    observed = None if model is None else model_points(model)
     by_base: dict[str, list[str]] = {}
     if observed is not None:
         for name in observed:
@@ -610,6 +623,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="COLMAP model of the photographs: a bright spot within "
                           "--exclude-radius of a 3D point seen in that image is tracked "
                           "texture, not a highlight")
+    det.add_argument("--sfm", default=None, metavar="WORKSPACE",
+                     help="first run COLMAP's structure from motion (pycolmap: pip install "
+                          "'warpspec[photos]') on the folder of photographs, into "
+                          "WORKSPACE/sparse/0, and use that model as --model")
     det.add_argument("--min-peak", type=positive, default=0.8,
                      help="least brightness of a highlight, fraction of full scale (default "
                           "0.8)")

@@ -40,7 +40,7 @@ import numpy as np
 
 from .errors import SceneError
 
-__all__ = ["PhotoSet", "closed_sphere", "render_photos"]
+__all__ = ["PhotoSet", "closed_sphere", "render_photos", "run_sfm"]
 
 _LIGHT_CODES = {"directional": 0, "point": 1, "camera": 2}
 
@@ -416,3 +416,44 @@ def render_photos(
         saturated_spot_ids=tuple(int(i) for i in point_ids[n_obj:n_obj + saturated_spots]),
         room=(lo, hi),
     )
+
+
+# --------------------------------------------------------------------------------------------
+# Structure from motion (optional: pycolmap)
+
+
+def run_sfm(images: str | os.PathLike, workspace: str | os.PathLike) -> Path:
+    """Run COLMAP's structure from motion on photographs with pycolmap (optional extra).
+
+    SIFT features, exhaustive matching and incremental mapping, with COLMAP's defaults; the
+    models go to ``workspace/sparse/N`` (binary), the largest first, as ``colmap mapper``
+    writes them.
+
+    Args:
+        images: The folder of photographs.
+        workspace: A new or empty folder for ``database.db`` and ``sparse/``.
+
+    Returns:
+        The folder of the first model, ``workspace/sparse/0``.
+
+    Raises:
+        SceneError: If pycolmap is not installed, the workspace is in use, or no image could
+            be registered.
+    """
+    try:
+        import pycolmap
+    except ImportError:
+        raise SceneError("--sfm: needs pycolmap (pip install 'warpspec[photos]')") from None
+    images, workspace = Path(images), Path(workspace)
+    if not images.is_dir():
+        raise SceneError(f"--sfm: {images} is not a folder of photographs")
+    if workspace.exists() and any(workspace.iterdir()):
+        raise SceneError(f"--sfm: {workspace} is not empty; give a new or empty folder")
+    workspace.mkdir(parents=True, exist_ok=True)
+    database = workspace / "database.db"
+    pycolmap.extract_features(database, images)
+    pycolmap.match_exhaustive(database)
+    maps = pycolmap.incremental_mapping(database, images, workspace / "sparse")
+    if not maps:
+        raise SceneError(f"--sfm: COLMAP registered none of the photographs of {images}")
+    return workspace / "sparse" / "0"
