@@ -1,8 +1,9 @@
-"""Import a COLMAP text model and a CSV of highlights as a warpspec :class:`~warpspec.Scene`.
+"""Import a COLMAP model and a CSV of highlights as a warpspec :class:`~warpspec.Scene`.
 
 COLMAP (https://colmap.github.io) is the structure-from-motion tool most people use to get
-cameras and sparse 3D points from photographs. Its text model is three files in one folder
-(``colmap model_converter --output_type TXT`` writes them from a binary model):
+cameras and sparse 3D points from photographs. Its model is three files in one folder, as
+text or binary (``cameras.bin``, ``images.bin``, ``points3D.bin``, read with the same checks);
+a ``sparse/`` folder holding ``0/`` is accepted too. The text files are:
 
 - ``cameras.txt``: ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]``, one camera (intrinsics) a line;
 - ``images.txt``: two lines per registered image, ``IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID
@@ -13,13 +14,13 @@ cameras and sparse 3D points from photographs. Its text model is three files in 
 
 Lines starting with ``#`` are comments. Every registered image becomes a warpspec camera
 ``P = K [R | t]``, in increasing ``IMAGE_ID`` order (``ColmapImport.image_names`` gives each
-camera's image); the model's 3D points become point constraints.
+camera's image). By default the point constraints are the object's points only, those near
+where the highlight rays meet and off the background's large planes, and the domain is sized
+from them and the rays (:func:`select_object_points`, :func:`auto_domain`).
 
-Camera models: ``SIMPLE_PINHOLE`` (f, cx, cy), ``PINHOLE`` (fx, fy, cx, cy), and
-``SIMPLE_RADIAL`` (f, cx, cy, k), ``RADIAL`` (f, cx, cy, k1, k2), ``OPENCV`` (fx, fy, cx, cy,
-k1, k2, p1, p2), whose lens distortion is ignored with a :class:`~warpspec.SceneWarning` that
-says how far it would move the highlights (undistort the images with ``colmap
-image_undistorter`` to get a ``PINHOLE`` model and no error). Other models are refused.
+Camera models: ``SIMPLE_PINHOLE``, ``PINHOLE``, ``SIMPLE_RADIAL``, ``RADIAL``, ``OPENCV`` and
+``FULL_OPENCV``; the highlights of a camera with lens distortion are undistorted (Newton's
+method on COLMAP's distortion). Fisheye models are refused, naming the camera.
 
 Highlights come as a CSV file of ``image,u,v`` rows: the image's ``NAME`` as in
 ``images.txt`` (or its base name when that is unique) and the pixel of the highlight's centre.
@@ -58,6 +59,17 @@ from .scene import Light, Scene, SceneWarning
 
 __all__ = [
     "CAMERA_MODELS",
+    "FISHEYE_MODELS",
+    "auto_domain",
+    "find_model",
+    "quaternion_from_rotation",
+    "ray_region",
+    "read_cameras_bin",
+    "read_images_bin",
+    "read_model",
+    "read_points3d_bin",
+    "select_object_points",
+    "write_model",
     "ColmapCamera",
     "ColmapImage",
     "ColmapImport",
