@@ -336,12 +336,13 @@ def test_import_colmap_writes_a_scene_that_reconstruct_reads(capsys, tmp_path):
     write_model(model)
     out = tmp_path / "scene.json"
     status, err = run(capsys, "import-colmap", model, "--highlights", model / "highlights.csv",
-                      "--light", "camera", "-o", out, "--max-points", "4",
+                      "--light", "camera", "-o", out, "--max-points", "4", "--points", "all",
                       "--domain", "-2", "-2", "-2", "2", "2", "2")
     assert status == 0, err
     assert "wrote" in err and "4 cameras, 4 specularities, 4 points" in err
     scene = ws.Scene.load(out)
-    expected = load_colmap(model, model / "highlights.csv", light="camera", max_points=4)
+    expected = load_colmap(model, model / "highlights.csv", light="camera", points="all",
+                           max_points=4)
     np.testing.assert_array_equal(scene.cameras, expected.cameras)
     np.testing.assert_array_equal(scene.spec_pixel, expected.spec_pixel)
     origins, dirs = scene.rays()
@@ -384,14 +385,15 @@ def test_import_colmap_names_the_bad_line(capsys, tmp_path):
     assert_one_line_error(status, err, f"{model / 'highlights.csv'}:2: v: expected a number")
 
 
-def test_import_colmap_warns_about_distortion_in_one_line(capsys, tmp_path):
+def test_import_colmap_undistorts_without_warnings(capsys, tmp_path):
+    # Lens distortion is now undistorted (tests/test_colmap.py checks the rays), not ignored
+    # with a warning.
     model = tmp_path / "sparse"
     write_model(model, model="OPENCV")
     status, err = run(capsys, "import-colmap", model, "--highlights", model / "highlights.csv",
                       "--light", "camera", "-o", tmp_path / "s.json")
     assert status == 0, err
-    warnings = [line for line in err.splitlines() if "warning:" in line]
-    assert len(warnings) == 2 and all("distortion is ignored" in w for w in warnings)
+    assert not [line for line in err.splitlines() if "warning:" in line]
 
 
 def test_crop_needs_three_constraints_and_says_so_before_the_run(capsys, tmp_path):

@@ -1,7 +1,6 @@
 """Import of COLMAP text models: cameras, points and highlights rebuilt exactly, bad lines named."""
 
 import math
-import re
 import tempfile
 import warnings
 from pathlib import Path
@@ -121,7 +120,8 @@ def model(tmp_path):
 def test_rays_of_the_imported_scene_pass_through_the_specular_points(tmp_path, camera_model):
     folder = tmp_path / camera_model
     centres, _, order = write_model(folder, model=camera_model)
-    scene = load_colmap(folder, folder / "highlights.csv", light="camera")
+    # points="all": the default keeps only the points near where the rays meet.
+    scene = load_colmap(folder, folder / "highlights.csv", light="camera", points="all")
     assert scene.num_cameras == 4
     np.testing.assert_allclose(scene.camera_centres(), centres, atol=1e-9)
     # Highlight k was written for the k-th image in file order; the camera is its rank by id.
@@ -179,12 +179,14 @@ def test_highlights_may_name_images_by_base_name(tmp_path):
 def test_point_selection(model):
     csv = model / "highlights.csv"
     assert load_colmap(model, csv, light="camera", points="none").num_points == 0
-    best = load_colmap(model, csv, light="camera", max_points=2)
+    # points="all" where the test is about the other options, not the automatic choice.
+    best = load_colmap(model, csv, light="camera", points="all", max_points=2)
     np.testing.assert_array_equal(best.points, POINTS[[1, 3]])  # errors 0.2 and 0.1
     chosen = import_colmap(model, csv, light="camera", points=[14, 10])
     assert chosen.point_ids == (10, 14)
     with pytest.warns(ws.SceneWarning, match="dropped 1 of 5 points outside the domain"):
-        boxed = load_colmap(model, csv, light="camera", domain=([-2, -2, -2], [2, 2, 2]))
+        boxed = load_colmap(model, csv, light="camera", points="all",
+                            domain=([-2, -2, -2], [2, 2, 2]))
     assert boxed.num_points == 4
     assert boxed.domain is not None
 
@@ -202,22 +204,54 @@ def test_lights_from_specs():
             parse_light(bad, field="--light")
 
 
-def test_lens_distortion_is_ignored_with_a_warning_that_says_how_much(tmp_path):
+def test_distorted_highlights_are_undistorted_onto_the_specular_points(tmp_path):
+    # Lens distortion used to be ignored with a warning; the highlights are now undistorted.
     folder = tmp_path / "opencv"
     write_model(folder, model="OPENCV")
-    with pytest.warns(ws.SceneWarning) as record:
-        load_colmap(folder, folder / "highlights.csv", light="camera")
-    messages = sorted(str(w.message) for w in record)
-    assert len(messages) == 2  # one per camera with highlights
-    for line, message in zip((4, 5), messages, strict=True):
-        assert re.search(rf"cameras.txt:{line}: camera {line - 3} is OPENCV \(k1=-0.1, .*\); its "
-                         r"lens distortion is ignored, which moves its highlights by up to "
-                         r"\d+\.\d\d px", message), message
-    folder = tmp_path / "radial"
-    write_model(folder, model="RADIAL")  # zero coefficients: nothing to say
+    camera = ColmapCamera(1, "OPENCV", WIDTH, HEIGHT, tuple(intrinsics("OPENCV")))
+    csv = folder / "highlights.csv"
+    rows = csv.read_text().splitlines()
+    out = [rows[0]]
+    for row in rows[1:]:
+        name, u, v = row.split(",")
+        (du, dv), = camera.distort([[float(u), float(v)]])
+        # Ignored, a shift of 1e-3 px would leave the ray 5e-6 from its point (depth 4, f 800).
+        assert math.hypot(du - float(u), dv - float(v)) > 1e-3
+        out.append(f"{name},{float(du)!r},{float(dv)!r}")
+    csv.write_text("\n".join(out) + "\n")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        load_colmap(folder, folder / "highlights.csv", light="camera")
+        scene = load_colmap(folder, csv, light="camera")
+    dist, _ = distance_to_rays(scene, SPECULAR)
+    assert np.all(dist < 1e-9), dist
+
+
+@pytest.mark.parametrize("model", ["SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV"])
+def test_undistort_inverts_distort(model):
+    params = {"SIMPLE_RADIAL": (500.0, 320.0, 240.0, -0.12),
+              "RADIAL": (500.0, 320.0, 240.0, -0.1, 0.02),
+              "OPENCV": (500.0, 510.0, 320.0, 240.0, -0.1, 0.01, 0.001, -0.002),
+              "FULL_OPENCV": (500.0, 510.0, 320.0, 240.0, -0.1, 0.01, 0.001, -0.002, 0.001,
+                              0.05, 0.001, 0.0005)}[model]
+    cam = ColmapCamera(1, model, 640, 480, params)
+    grid = np.stack(np.meshgrid(np.linspace(0, 640, 9), np.linspace(0, 480, 7)), -1)
+    ideal = grid.reshape(-1, 2)
+    back, ok = cam.undistort(cam.distort(ideal))
+    assert ok.all()
+    np.testing.assert_allclose(back, ideal, atol=1e-7)
+
+
+def test_full_opencv_distortion_follows_colmap():
+    p = (400.0, 410.0, 300.0, 200.0, 0.1, -0.02, 0.003, 0.001, 0.004, 0.2, -0.01, 0.002)
+    cam = ColmapCamera(1, "FULL_OPENCV", 600, 400, p)
+    x, y = 0.3, -0.25
+    r2 = x * x + y * y
+    radial = (1 + 0.1 * r2 - 0.02 * r2**2 + 0.004 * r2**3) / (1 + 0.2 * r2 - 0.01 * r2**2
+                                                                + 0.002 * r2**3)
+    xd = x * radial + 2 * 0.003 * x * y + 0.001 * (r2 + 2 * x * x)
+    yd = y * radial + 2 * 0.001 * x * y + 0.003 * (r2 + 2 * y * y)
+    np.testing.assert_allclose(cam.distort([[300 + 400 * x, 200 + 410 * y]]),
+                               [[300 + 400 * xd, 200 + 410 * yd]], rtol=1e-14)
 
 
 def test_distortion_of_a_radial_camera_follows_colmap():
@@ -383,3 +417,141 @@ def test_the_octant_scene_round_trips_through_a_colmap_model(tmp_path):
     np.testing.assert_allclose(d2, d1, atol=1e-9)
     np.testing.assert_allclose(scene.normals(), octant.normals(), atol=1e-9)
     np.testing.assert_array_equal(scene.points, octant.points)
+
+
+# -- binary models, COLMAP's folder layout, the object's points and the domain -----------------
+
+
+def tabletop_model(folder: Path, *, text=True, binary=True, camera_model="PINHOLE"):
+    """A shiny ball (radius 0.1) on a table, 24 flash photographs, 5 points on the ball and 600
+    on the table and a wall; returns the ids of the ball's points."""
+    from warpspec.colmap import ColmapCamera, ColmapImage, quaternion_from_rotation, write_model
+
+    rng = np.random.default_rng(3)
+    centre = np.array([0.0, 0.0, 0.1])
+    az = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    el = np.radians(np.where(np.arange(24) % 2, 25.0, 45.0))
+    cams = centre + 0.6 * np.column_stack([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el),
+                                           np.sin(el)])
+    params = intrinsics(camera_model)
+    camera = ColmapCamera(1, camera_model, WIDTH, HEIGHT, tuple(params))
+    up = rng.normal(size=(5, 3))
+    up[:, 2] = np.abs(up[:, 2]) + 0.5
+    ball = centre + 0.1 * up / np.linalg.norm(up, axis=1, keepdims=True)
+    table = np.column_stack([rng.uniform(-1.5, 1.5, (500, 2)), np.zeros(500)])
+    table = table[np.linalg.norm(table[:, :2], axis=1) > 0.1]
+    wall = np.column_stack([np.full(100, 1.5), rng.uniform(-1.5, 1.5, 100),
+                            rng.uniform(0, 1.0, 100)])
+    xyz = np.concatenate([ball, table, wall])
+    ids = np.arange(100, 100 + len(xyz))
+    images, obs, rows = [], [], ["image,u,v,peak,size,score"]
+    tracks = [[] for _ in xyz]
+    for k, c in enumerate(cams):
+        R = look_at(c, centre)
+        t = -R @ c
+        images.append(ColmapImage(k + 1, tuple(quaternion_from_rotation(R)), tuple(t), 1,
+                                  f"photo{k:02d}.jpg"))
+        h = (xyz @ R.T + t) @ K_of(camera_model).T
+        uv = camera.distort(h[:, :2] / h[:, 2:3])
+        seen = np.flatnonzero((h[:, 2] > 0) & (uv[:, 0] > 0) & (uv[:, 0] < WIDTH)
+                              & (uv[:, 1] > 0) & (uv[:, 1] < HEIGHT))
+        obs.append(np.column_stack([uv[seen], ids[seen]]))
+        for j, i in enumerate(seen):
+            tracks[i].append((k + 1, j))
+        x = centre + 0.1 * (c - centre) / np.linalg.norm(c - centre)  # the flash's highlight
+        q = K_of(camera_model) @ (R @ x + t)
+        (u, v), = camera.distort((q[:2] / q[2])[None])
+        rows.append(f"photo{k:02d}.jpg,{float(u)!r},{float(v)!r},1.0,12,0.6")
+    folder.mkdir(parents=True)
+    write_model(folder, {1: camera}, images, obs, ids, xyz, np.full((len(xyz), 3), 90),
+                rng.uniform(0.2, 1.0, len(xyz)), tracks, text=text, binary=binary)
+    (folder.parent / "highlights.csv").write_text("\n".join(rows) + "\n")
+    return tuple(int(i) for i in ids[:5]), ball, centre
+
+
+def test_binary_and_text_models_read_the_same(tmp_path):
+    from warpspec.colmap import read_model
+
+    tabletop_model(tmp_path / "sparse" / "0", camera_model="OPENCV")
+    folder = tmp_path / "sparse" / "0"
+    text = read_model(folder)
+    (tmp_path / "bin").mkdir()
+    for name in ("cameras.bin", "images.bin", "points3D.bin"):
+        (folder / name).rename(tmp_path / "bin" / name)
+    binary = read_model(tmp_path / "bin")
+    assert text[4] == "text" and binary[4] == "binary"
+    assert {k: (c.model, c.width, c.height, c.params) for k, c in text[0].items()} == \
+        {k: (c.model, c.width, c.height, c.params) for k, c in binary[0].items()}
+    assert text[1].keys() == binary[1].keys()
+    for k, im in text[1].items():
+        other = binary[1][k]
+        assert (im.qvec, im.tvec, im.camera_id, im.name) == (other.qvec, other.tvec,
+                                                             other.camera_id, other.name)
+        np.testing.assert_array_equal(im.points2d, other.points2d)
+    for a, b in zip(text[2], binary[2], strict=True):
+        np.testing.assert_array_equal(a, b)
+    csv = tmp_path / "sparse" / "highlights.csv"
+    s_text = load_colmap(folder, csv, light="camera")
+    s_bin = load_colmap(tmp_path / "bin", csv, light="camera")
+    np.testing.assert_array_equal(s_text.cameras, s_bin.cameras)
+    np.testing.assert_array_equal(s_text.points, s_bin.points)
+
+
+def test_binary_errors_name_the_file_and_record(tmp_path):
+    folder = tmp_path / "m"
+    tabletop_model(folder, text=False)
+    data = (folder / "images.bin").read_bytes()
+    (folder / "images.bin").write_bytes(data[:200])
+    with pytest.raises(ws.SceneError, match=r"images.bin, record 1 \(byte \d+\): POINTS2D: "):
+        load_colmap(folder, tmp_path / "highlights.csv", light="camera")
+    cams = bytearray((folder / "cameras.bin").read_bytes())
+    cams[12:16] = (5).to_bytes(4, "little")  # model id 5: OPENCV_FISHEYE
+    (folder / "cameras.bin").write_bytes(bytes(cams))
+    with pytest.raises(ws.SceneError, match=r"cameras.bin, record 1 \(byte \d+\): MODEL: camera 1 "
+                       r"is 'OPENCV_FISHEYE', a fisheye model"):
+        load_colmap(folder, tmp_path / "highlights.csv", light="camera")
+
+
+def test_fisheye_text_camera_is_refused_by_name(model):
+    _edit(model / "cameras.txt", 4, "1 OPENCV_FISHEYE 640 480 800 790 320 240 0 0 0 0")
+    with pytest.raises(ws.SceneError, match=r"cameras.txt:4: MODEL: camera 1 is 'OPENCV_FISHEYE', "
+                       "a fisheye model"):
+        load_colmap(model, model / "highlights.csv", light="camera")
+
+
+@pytest.mark.parametrize("camera_model", ["PINHOLE", "OPENCV"])
+def test_the_balls_points_and_a_domain_that_every_ray_enters(tmp_path, camera_model):
+    from warpspec.colmap import _ray_box, read_model
+
+    ball_ids, ball, centre = tabletop_model(tmp_path / "sparse" / "0", binary=False,
+                                            camera_model=camera_model)
+    imported = import_colmap(tmp_path / "sparse", tmp_path / "sparse" / "highlights.csv",
+                             light="camera")
+    assert imported.model_dir == tmp_path / "sparse" / "0"
+    assert imported.point_ids == ball_ids  # not one of the 600 table and wall points
+    scene = imported.scene
+    lo, hi = scene.domain
+    assert np.all(lo <= ball.min(axis=0)) and np.all(hi >= ball.max(axis=0))
+    assert np.all(hi - lo < 0.5)  # about the ball (0.2 across), not the table (3 m)
+    origins, dirs = scene.rays()
+    assert _ray_box(origins, dirs, lo, hi).all()
+    # The flash rays all pass through the ball's centre: it lies inside the domain.
+    assert np.all((centre > lo) & (centre < hi))
+    total = len(read_model(tmp_path / "sparse")[2][0])
+    assert load_colmap(tmp_path / "sparse", None, light=None).num_points == total  # no rays
+
+
+def test_a_sparse_folder_without_a_model_says_where_it_looked(tmp_path):
+    (tmp_path / "sparse" / "1").mkdir(parents=True)
+    with pytest.raises(ws.SceneError, match=r"no COLMAP model here: expected cameras.txt or "
+                       r"cameras.bin, here or in .*sparse/0 \(it holds the folders 1\)"):
+        load_colmap(tmp_path / "sparse", None, light=None)
+
+
+def test_quaternion_round_trip():
+    from warpspec.colmap import quaternion_from_rotation
+
+    for angles in ([0.4, -1.1, 2.0], [np.pi, 0, 0], [0, np.pi, 0.001], [3.0, 0.1, -3.1]):
+        R = Rotation.from_euler("xyz", angles).as_matrix()
+        np.testing.assert_allclose(rotation_from_quaternion(quaternion_from_rotation(R)), R,
+                                   atol=1e-12)

@@ -6,6 +6,7 @@ obey the law of reflection.
 """
 
 from .colmap import load_colmap
+from .detect import detect_highlights
 from .errors import InputError, ReconstructionError, SceneError
 from .grid import Grid
 from .redistance import point_distance, redistance
@@ -27,6 +28,7 @@ __all__ = [
     "SceneWarning",
     "Verdict",
     "__version__",
+    "detect_highlights",
     "load_colmap",
     "point_distance",
     "reconstruct",

@@ -55,7 +55,7 @@ from ._cli_common import (
     positive,
     positive_int,
 )
-from .errors import InputError, ReconstructionError
+from .errors import InputError, ReconstructionError, SceneError
 
 __all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"]
 
@@ -415,11 +415,14 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
 def _cmd_import_colmap(args: argparse.Namespace) -> int:
     out = output_path(args.output, SCENE_FORMATS, "--output")
+    import numpy as np
+
     model = Path(args.model)
     check_paths({"--output": out},
                 {"--highlights": Path(args.highlights) if args.highlights else None,
-                 **{f"the model's {name}": model / name for name in
-                    ("cameras.txt", "images.txt", "points3D.txt")}})
+                 **{f"the model's {name}": model / sub / name for sub in ("", "0")
+                    for name in ("cameras.txt", "images.txt", "points3D.txt", "cameras.bin",
+                                 "images.bin", "points3D.bin")}})
     from .colmap import import_colmap, parse_light
 
     light = parse_light(args.light, field="--light") if args.light is not None else None
@@ -446,8 +449,71 @@ def _cmd_import_colmap(args: argparse.Namespace) -> int:
         outputs.commit()
     if not args.quiet:
         _check_scene(scene)
+        lo, hi = scene.bounds()
+        where = "given" if args.domain is not None else "from the rays and points"
         _say(f"wrote {out}: {scene.num_cameras} cameras, {scene.num_specularities} "
-             f"specularities, {scene.num_points} points")
+             f"specularities, {scene.num_points} points ({imported.model_format} model "
+             f"{imported.model_dir}); domain {where}: min {np.round(lo, 4).tolist()} max "
+             f"{np.round(hi, 4).tolist()}")
+    return 0
+
+
+def _cmd_detect(args: argparse.Namespace) -> int:
+    import io
+
+    from .detect import detect_highlights, find_images, model_points, read_image
+
+    out = output_path(args.output, (".csv",), "--output")
+    photos = find_images(args.images)
+    check_paths({"--output": out}, {f"photograph {name}": path for name, path in photos})
+    model = args.model
+    if args.sfm is not None:
+        if model is not None:
+            raise SceneError("--sfm: give either --model (an existing COLMAP model) or --sfm "
+                             "(make one), not both")
+        folders = [p for p in args.images if Path(p).is_dir()]
+        if len(folders) != 1 or len(args.images) != 1:
+            raise SceneError("--sfm: give exactly one folder of photographs")
+        from .photos import run_sfm
+
+        model = run_sfm(folders[0], args.sfm)
+        if not args.quiet:
+            _say(f"structure from motion: model in {model}")
+    observed = None if model is None else model_points(model)
+    by_base: dict[str, list[str]] = {}
+    if observed is not None:
+        for name in observed:
+            by_base.setdefault(Path(name).name, []).append(name)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["image", "u", "v", "peak", "size", "score"])
+    found = rejected = 0
+    for name, path in photos:
+        if observed is not None and name not in observed:
+            match = by_base.get(Path(name).name, [])
+            if len(match) == 1:
+                name = match[0]
+        image = read_image(path)
+        options = {"min_peak": args.min_peak, "min_contrast": args.min_contrast,
+                   "radius": args.radius}
+        rows = detect_highlights(image, **options)
+        if observed is not None:
+            kept = detect_highlights(image, exclude=observed.get(name),
+                                     exclude_radius=args.exclude_radius, **options)
+            rejected += len(rows) - len(kept)
+            rows = kept
+        for u, v, peak, size, score in rows:
+            writer.writerow([name, f"{u:.4f}", f"{v:.4f}", f"{peak:.4f}", int(size),
+                             f"{score:.4f}"])
+        found += len(rows)
+    text = buffer.getvalue()
+    with StagedOutputs() as outputs:
+        outputs.stage(out, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        outputs.commit()
+    if not args.quiet:
+        extra = (f", {rejected} bright spots dropped as tracked texture"
+                 if observed is not None else "")
+        _say(f"wrote {out}: {found} highlights in {len(photos)} photographs{extra}")
     return 0
 
 
@@ -481,13 +547,14 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _points_choice(text: str) -> str | list[int]:
-    if text in ("all", "none"):
+    if text in ("all", "none", "auto"):
         return text
     try:
         return [int(p) for p in text.split(",") if p.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"expected 'all', 'none' or POINT3D_IDs like 12,40,41, got {text!r}") from None
+            f"expected 'auto', 'all', 'none' or POINT3D_IDs like 12,40,41, got {text!r}"
+        ) from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -569,31 +636,70 @@ def build_parser() -> argparse.ArgumentParser:
     rec.set_defaults(func=_cmd_reconstruct)
 
     imp = sub.add_parser(
-        "import-colmap", help="make a scene file from a COLMAP text model and highlights",
-        description="Make a scene file from a COLMAP text model (cameras.txt, images.txt, "
-                    "points3D.txt) and a CSV of highlights (image,u,v rows; by default in "
-                    "COLMAP's pixel convention, where the centre of the top-left pixel is "
-                    "(0.5, 0.5)). Every registered image becomes a camera, in IMAGE_ID order.")
-    imp.add_argument("model", help="folder of the COLMAP text model")
+        "import-colmap", help="make a scene file from a COLMAP model and highlights",
+        description="Make a scene file from a COLMAP model (cameras, images, points3D as .txt "
+                    "or .bin) and a CSV of highlights (image,u,v rows, as 'warpspec detect' "
+                    "writes them; by default in COLMAP's pixel convention, where the centre of "
+                    "the top-left pixel is (0.5, 0.5)). Every registered image becomes a "
+                    "camera, in IMAGE_ID order; highlights are undistorted. By default the "
+                    "points are those of the object, near where the highlight rays meet (not "
+                    "the table and walls), and the domain is sized so that every ray enters.")
+    imp.add_argument("model", help="folder of the COLMAP model, or a sparse/ folder holding 0/")
     imp.add_argument("--highlights", default=None, metavar="CSV",
-                     help="CSV of highlights: image name, u, v (header optional)")
+                     help="CSV of highlights: image name, u, v, then any columns (header "
+                          "optional)")
     imp.add_argument("--light", default=None, metavar="SPEC",
                      help="the light, in the model's frame: camera, directional:X,Y,Z (toward "
                           "the light), point:X,Y,Z, or a JSON object")
     imp.add_argument("-o", "--output", required=True, help="scene file to write (.json)")
-    imp.add_argument("--points", type=_points_choice, default="all",
-                     help="3D points to use as constraints: all, none, or POINT3D_IDs "
-                          "12,40,41 (default all)")
+    imp.add_argument("--points", type=_points_choice, default="auto",
+                     help="3D points to use as constraints: auto (the object's: near where "
+                          "the highlight rays meet, off the background planes), all, none, or "
+                          "POINT3D_IDs 12,40,41 (default auto)")
     imp.add_argument("--max-points", type=non_negative_int, default=None,
                      help="keep at most this many points, those of least reprojection error")
     imp.add_argument("--domain", type=finite, nargs=6, default=None,
                      metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
-                     help="box to reconstruct in; points outside it are dropped")
+                     help="box to reconstruct in; points outside it are dropped (default: "
+                          "sized from the rays and the object's points)")
     imp.add_argument("--pixel-convention", choices=["colmap", "index"], default="colmap",
                      help="colmap: top-left pixel centre at (0.5, 0.5) (default); index: at "
                           "(0, 0), as OpenCV and NumPy row/column indices")
     imp.add_argument("--quiet", action="store_true", help="print nothing but errors")
     imp.set_defaults(func=_cmd_import_colmap)
+
+    det = sub.add_parser(
+        "detect", help="find the specular highlights in photographs (CSV for import-colmap)",
+        description="Find specular highlights (small, near-saturated, compact spots much "
+                    "brighter than their surroundings) in photographs, at subpixel precision, "
+                    "and write one row per highlight: image,u,v,peak,size,score, in COLMAP's "
+                    "pixel convention (the centre of the top-left pixel is (0.5, 0.5)); the "
+                    "image is named as COLMAP names it, relative to the folder given.")
+    det.add_argument("images", nargs="+", metavar="IMAGE_OR_FOLDER",
+                     help="photographs (PNG, JPEG, TIFF; 8 or 16 bits) or folders of them")
+    det.add_argument("-o", "--output", required=True, help="CSV of highlights to write (.csv)")
+    det.add_argument("--model", default=None, metavar="SPARSE_DIR",
+                     help="COLMAP model of the photographs: a bright spot within "
+                          "--exclude-radius of a 3D point seen in that image is tracked "
+                          "texture, not a highlight")
+    det.add_argument("--sfm", default=None, metavar="WORKSPACE",
+                     help="first run COLMAP's structure from motion (pycolmap: pip install "
+                          "'warpspec[photos]') on the folder of photographs, into "
+                          "WORKSPACE/sparse/0, and use that model as --model")
+    det.add_argument("--min-peak", type=positive, default=0.8,
+                     help="least brightness of a highlight, fraction of full scale (default "
+                          "0.8)")
+    det.add_argument("--min-contrast", type=positive, default=0.3,
+                     help="least height above the local background, fraction of full scale "
+                          "(default 0.3)")
+    det.add_argument("--radius", type=positive, default=None, metavar="PX",
+                     help="largest highlight radius in pixels (default 2%% of the smaller "
+                          "image side, at least 4)")
+    det.add_argument("--exclude-radius", type=non_negative, default=3.0, metavar="PX",
+                     help="with --model: distance in pixels within which a tracked point "
+                          "makes a bright spot texture (default 3)")
+    det.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    det.set_defaults(func=_cmd_detect)
 
     from .cli_tools import add_parsers
 

@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -147,7 +148,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.name not in scene_names():
         raise SceneError(f"NAME: unknown scene {args.name!r}; expected one of "
                          f"{', '.join(scene_names())}")
-    out = output_path(args.output, (".json",), "--output")
+    if args.output is None and args.photos is None:
+        raise SceneError("--output: required (the scene file to write, .json) unless --photos "
+                         "DIR is given")
+    out = output_path(args.output, (".json",), "--output") if args.output else None
+    photos = _photos_folder(args.photos) if args.photos else None
     truth = output_path(args.truth, MESH_FORMATS, "--truth") if args.truth else None
     truth_json = (output_path(args.truth_json, (".json",), "--truth-json")
                   if args.truth_json else None)
@@ -172,10 +177,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         if str(exc).startswith("highlights:"):
             raise SceneError(f"--{exc}") from None
         raise
-    written = [str(out)]
+    written = []
     # All or nothing: a scene without its truth is worse than no scene.
     with StagedOutputs() as outputs:
-        outputs.stage(out, lambda tmp: synthetic.to_json(tmp))
+        if out is not None:
+            outputs.stage(out, lambda tmp: synthetic.to_json(tmp))
+            written.append(str(out))
         if truth is not None:
             mesh = synthetic.truth_mesh()
             outputs.stage(truth, lambda tmp: mesh.export(tmp,
@@ -186,6 +193,12 @@ def _cmd_synth(args: argparse.Namespace) -> int:
             outputs.stage(truth_json, lambda tmp: tmp.write_text(text))
             written.append(str(truth_json))
         outputs.commit()
+    if photos is not None:
+        from .photos import render_photos
+
+        shot = render_photos(synthetic, photos, scale=PHOTO_SCALE, seed=args.seed)
+        written.append(f"{photos} ({len(shot.image_names)} photographs {shot.width}x"
+                       f"{shot.height}, COLMAP model in sparse/0, highlights_true.csv)")
     if not args.quiet:
         print(f"{args.name}: {len(synthetic.truth_points)} specularities "
               f"({int(synthetic.outlier_mask.sum())} outliers, noise {args.noise:g} px), "
@@ -201,6 +214,27 @@ def _light_kind(scene_dict: dict) -> str:
         return f"{scene_dict['light']['type']} light"
     kinds = sorted({c["light"]["type"] for c in scene_dict["cameras"] if "light" in c})
     return f"per-camera {'/'.join(kinds)} lights"
+
+
+PHOTO_SCALE = 0.5
+"""Size of ``synth --photos`` photographs relative to the scenes' 640x480 cameras."""
+
+
+def _photos_folder(text: str) -> Path:
+    """The folder for ``--photos``: new, or empty, or one it wrote before (images/, sparse/)."""
+    p = Path(text)
+    if p.exists() and not p.is_dir():
+        raise SceneError(f"--photos: {text!r} is a file, expected a folder")
+    if p.is_dir():
+        extra = sorted(x.name for x in p.iterdir()
+                       if x.name not in ("images", "sparse", "highlights_true.csv", "truth.ply",
+                                         "scene_true.json"))
+        if extra:
+            raise SceneError(f"--photos: {text!r} holds other files ({', '.join(extra[:3])}); "
+                             "give a new or empty folder")
+    elif not p.parent.is_dir():
+        raise SceneError(f"--photos: the folder {str(p.parent)!r} does not exist")
+    return p
 
 
 def _scene_list() -> str:
@@ -346,8 +380,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     synth.add_argument("name", metavar="NAME", help="built-in scene (listed below)")
-    synth.add_argument("-o", "--output", required=True, metavar="SCENE",
-                       help="scene file to write (.json)")
+    synth.add_argument("-o", "--output", default=None, metavar="SCENE",
+                       help="scene file to write (.json); required unless --photos is given")
+    synth.add_argument("--photos", default=None, metavar="DIR",
+                       help="also render 320x240 photographs of the glossy object in a textured "
+                            "room, with the exact COLMAP model (DIR/images, DIR/sparse/0, "
+                            "DIR/highlights_true.csv, DIR/truth.ply)")
     synth.add_argument("--truth", metavar="MESH", default=None,
                        help="also write the truth mesh: the surface cut to the patch the "
                             f"highlights lie on ({', '.join(MESH_FORMATS)})")
