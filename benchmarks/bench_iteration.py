@@ -1,6 +1,6 @@
 """Benchmark: one solver iteration against one NumPy step of the same PDE.
 
-For each grid (the octant scene at ``resolution=N``, bent with ``bulge=0.5``, so that the rays
+For each grid (the octant scene at ``resolution=N``, default options, so that the rays
 hit the surface and the constraints own nodes), in one process and interleaved, repeated
 ``--repeats`` times (medians reported):
 
@@ -72,7 +72,7 @@ def measure(size: int, *, device, repeats: int, iterations: int | None, breakdow
         wp.synchronize_device(device)
 
     t0 = time.perf_counter()
-    solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=size, bulge=0.5, device=device)
+    solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=size, device=device)
     sync()
     setup = time.perf_counter() - t0
     grid = solver.grid
@@ -236,7 +236,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         results.append(measure(size, device=device, repeats=args.repeats,
                                iterations=args.iterations, breakdown=not args.no_breakdown,
                                numpy_repeats=args.numpy_repeats))
-    print(f"Octant scene at resolution N, bulge 0.5; warp {wp.__version__}, device "
+    print(f"Octant scene at resolution N, default options; warp {wp.__version__}, device "
           f"{device.alias} ({device.name}); NumPy {np.__version__} on the host; medians of "
           f"{args.repeats} interleaved runs; an iteration is timed over "
           f"{', '.join(str(r['iterations_timed']) for r in results)} steps "

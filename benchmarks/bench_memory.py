@@ -1,6 +1,6 @@
 """Benchmark: device memory of a Reconstructor, in bytes per voxel of its grid.
 
-For each grid (the octant scene at ``resolution=N``, bulge 0.5), a Reconstructor is built and
+For each grid (the octant scene at ``resolution=N``, default options), a Reconstructor is built and
 run for ``--iterations`` steps with measures (so every scratch array the iteration uses exists),
 and its memory is counted three ways:
 
@@ -125,7 +125,7 @@ def measure(size: int, *, device, iterations: int) -> dict:
     reports: list[str] = []
     with wp.ScopedMemoryTracker(f"reconstructor-{size}", print=False,
                                 report_func=reports.append) as tracker:
-        solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=size, bulge=0.5,
+        solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=size,
                                   device=device)
         solver.run(iterations, measure_every=1)
         wp.synchronize_device(device)
@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     device = resolve_device(args.device)
     sizes = [int(v) for item in args.sizes for v in str(item).split(",") if v]
     rows = [measure(n, device=device, iterations=args.iterations) for n in sizes]
-    print(f"Octant scene at resolution N, bulge 0.5, after {args.iterations} iterations with "
+    print(f"Octant scene at resolution N, default options, after {args.iterations} iterations with "
           f"measures; warp {wp.__version__}, device {device.alias} ({device.name}). "
           "B/voxel = bytes / nodes of the grid.")
     print()

@@ -4,11 +4,11 @@ Each run is a fresh Python process, timed from outside (wall clock, and the CPU 
 process from ``getrusage``), so interpreter start, imports, kernel compilation or cache loads,
 the set-up, the iterations, marching cubes and writing the mesh all count:
 
-- ``cli``: ``warpspec reconstruct examples/scenes/octant.json -o OUT.ply --bulge 0.5 --quiet``
+- ``cli``: ``warpspec reconstruct examples/scenes/octant.json -o OUT.ply --quiet``
   (plus ``--metrics M.csv --measure-every 0`` to read the final errors: the measures of the
   start and the end, as a run without ``--metrics`` reduces them; and ``--resolution``/
   ``--iterations``/``--device`` when they differ from the defaults);
-- ``api``: ``Reconstructor(scene, resolution=64, bulge=0.5)``, ``.run(300)``, ``.result()``
+- ``api``: ``Reconstructor(scene, resolution=64)``, ``.run(300)``, ``.result()``
   and ``.write_mesh`` in a short script, which also reports its own phases.
 
 Cold: ``WARP_CACHE_PATH`` points at a new empty folder (Python's bytecode and the OS file cache
@@ -42,7 +42,7 @@ import warpspec as ws
 cfg = json.loads(sys.argv[1])
 t1 = time.perf_counter()
 solver = ws.Reconstructor(ws.Scene.load(cfg["scene"]), resolution=cfg["resolution"],
-                          bulge=cfg["bulge"], device=cfg["device"])
+                          device=cfg["device"])
 t2 = time.perf_counter()
 solver.run(cfg["iterations"])
 t3 = time.perf_counter()
@@ -67,7 +67,7 @@ def _warpspec_command() -> list[str]:
 def cli_command(args: argparse.Namespace, output: Path, metrics: Path) -> list[str]:
     """The command line that the ``cli`` rows time."""
     cmd = _warpspec_command() + ["reconstruct", str(OCTANT.relative_to(ROOT)), "-o", str(output),
-                                 "--bulge", str(args.bulge), "--quiet", "--metrics", str(metrics),
+                                 "--quiet", "--metrics", str(metrics),
                                  "--measure-every", "0"]
     if args.resolution != 64:
         cmd += ["--resolution", str(args.resolution)]
@@ -104,7 +104,7 @@ def run_once(runner: str, args: argparse.Namespace, cache: str | None, work: Pat
             last = list(csv.DictReader(f))[-1]
         return {"wall_s": wall, "cpu_s": cpu, "normal_error": float(last["normal_error"]),
                 "point_error": float(last["point_error"])}
-    cfg = {"scene": str(OCTANT), "resolution": args.resolution, "bulge": args.bulge,
+    cfg = {"scene": str(OCTANT), "resolution": args.resolution,
            "device": args.device, "iterations": args.iterations, "output": str(output)}
     wall, cpu, out = _run([sys.executable, "-c", API_SCRIPT, json.dumps(cfg)], cache)
     line = next(x for x in out.splitlines() if x.startswith("BENCH-JSON "))
@@ -183,7 +183,6 @@ def main(argv: list[str] | None = None) -> list[dict]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--resolution", type=int, default=64, help="grid resolution")
     parser.add_argument("--iterations", type=int, default=300, help="iterations of the flow")
-    parser.add_argument("--bulge", type=float, default=0.5, help="bend of the initial plane")
     parser.add_argument("--repeats", type=int, default=3, help="warm runs per runner (median)")
     parser.add_argument("--cold-repeats", type=int, default=1,
                         help="cold runs per runner, each on a new empty cache (median)")
@@ -200,8 +199,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     rows = measure(args)
     cmd = cli_command(args, Path("OUT.ply"), Path("METRICS.csv"))
     cmd[0] = Path(cmd[0]).name if cmd[0] != sys.executable else "python"
-    print(f"Octant end to end ({args.resolution}^3, {args.iterations} iterations, bulge "
-          f"{args.bulge}, device {args.device}); each run a new process. The cli rows time "
+    print(f"Octant end to end ({args.resolution}^3, {args.iterations} iterations, default "
+          f"options, device {args.device}); each run a new process. The cli rows time "
           f"`{' '.join(cmd)}`.")
     print()
     print(tables(rows, args))

@@ -189,7 +189,7 @@ def verify(resolution: int = 24, *, device: str = "cpu", seed: int = 0) -> list[
     import warpspec as ws
     from warpspec.kernels.differences import NEIGHBOUR_OWNED, NO_OWNER
 
-    solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=resolution, bulge=0.5,
+    solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=resolution,
                               device=device)
     owner, normals, gauss = (a.numpy() for a in flow_inputs(solver))
     phi = solver.phi.numpy()

@@ -90,22 +90,22 @@ class Setup:
 
 
 SETUPS: dict[str, Setup] = {s.label: s for s in (
-    Setup("octant-paper", "octant", {"bulge": 0.5, "fit_iterations": 0},
+    Setup("octant-paper", "octant", {"start": "paper", "bulge": 0.5},
           note="paper section 4.2: plane through the 3 points, bent with c = 0.5"),
-    Setup("octant", "octant", {"bulge": 0.5},
-          note="the same, then warpspec's default start (height field fitted to the normals)"),
-    Setup("octant-noise", "octant", {"bulge": 0.5}, noise=0.5, seed=0,
+    Setup("octant", "octant", {},
+          note="warpspec's default options (the implicit start, no bulge)"),
+    Setup("octant-noise", "octant", {}, noise=0.5, seed=0,
           note="octant with 0.5 px Gaussian noise on every highlight"),
-    Setup("ellipsoid-cap-paper", "ellipsoid-cap", {"fit_iterations": 0},
+    Setup("ellipsoid-cap-paper", "ellipsoid-cap", {"start": "paper"},
           note="the plane through the 4 rim points, as the paper would start"),
     Setup("ellipsoid-cap", "ellipsoid-cap", {},
           note="20 highlights of a point lamp, 4 points on the rim"),
-    Setup("car-window-paper", "car-window", {"bulge": 0.3, "bulge_cap": 3.0,
-                                             "fit_iterations": 0},
+    Setup("car-window-paper", "car-window", {"start": "paper", "bulge": 0.3,
+                                             "bulge_cap": 3.0},
           note="paper section 4.1: plane bent with c = 0.3, d_max = 3 voxels"),
-    Setup("car-window", "car-window", {"bulge": 0.3, "bulge_cap": 3.0},
-          note="38 normals, 2 corners, sun; the bent plane, then the fitted start"),
-    Setup("wine-bottle-paper", "wine-bottle", {"fit_iterations": 0},
+    Setup("car-window", "car-window", {},
+          note="38 normals, 2 corners, sun; default options"),
+    Setup("wine-bottle-paper", "wine-bottle", {"start": "paper"},
           note="the plane through the 4 label corners, as the paper would start"),
     Setup("wine-bottle", "wine-bottle", {},
           note="11 views along an arc, camera flash, 4 label corners (paper 4.1)"),
@@ -125,13 +125,13 @@ FIGURE_STEMS = {"octant": "octant", "ellipsoid-cap": "ellipsoid_cap",
 
 
 def is_paper_start(setup: Setup) -> bool:
-    """Whether a setup starts as the paper does (no fitted height field)."""
-    return setup.options.get("fit_iterations") == 0
+    """Whether a setup starts as the paper does (plane and bend)."""
+    return setup.options.get("start") == "paper"
 
 
 def run_label(exp: Experiment) -> str:
     """Legend of a run in the figures: which start, and the noise."""
-    label = "paper start" if is_paper_start(exp.setup) else "fitted start"
+    label = "paper start" if is_paper_start(exp.setup) else "default start"
     return label + (f", {exp.setup.noise:g} px noise" if exp.setup.noise else "")
 
 
@@ -227,7 +227,8 @@ def warm_up(device: str | None) -> None:
     if key in _WARM:
         return
     scene = make_scene("octant").scene()
-    solver = Reconstructor(scene, resolution=12, device=device, bulge=0.5, reinit_every=1)
+    solver = Reconstructor(scene, resolution=12, device=device, start="paper", bulge=0.5,
+                           reinit_every=1)
     solver.run(2)
     solver.result()
     _WARM.add(key)

@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 OCTANT = ROOT / "examples" / "scenes" / "octant.json"
 OCTANT_TRUTH = ROOT / "examples" / "scenes" / "octant.ply"
 OCTANT_TRUTH_JSON = ROOT / "examples" / "scenes" / "octant.truth.json"
-FAST = ["--resolution", "16", "--iterations", "6", "--bulge", "0.5", "--device", "cpu",
-        "--quiet"]
+FAST = ["--resolution", "16", "--iterations", "6", "--start", "paper", "--bulge", "0.5",
+        "--device", "cpu", "--quiet"]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
@@ -150,12 +150,12 @@ def test_scene_save_onto_itself_on_a_full_disk_keeps_the_original(tmp_path):
 
 @pytest.fixture(scope="module")
 def unit_runs():
-    """The octant at three scales; the paper's start (fit_iterations=0) keeps it short."""
+    """The octant at three scales; the paper's start (start="paper") keeps it short."""
     out = {}
     for s in (1.0, 1e-6, 1e9):
         scene = ws.Scene.from_dict(scaled(octant_data(), s))
-        out[s] = ws.reconstruct(scene, iterations=10, resolution=24, bulge=0.5, device="cpu",
-                                fit_iterations=0)
+        out[s] = ws.reconstruct(scene, iterations=10, resolution=24, start="paper", bulge=0.5,
+                                device="cpu")
     return out
 
 
@@ -542,7 +542,7 @@ def test_numpy_warnings_do_not_leak(capsys, folder):
 
 @pytest.fixture(scope="module")
 def octant_result():
-    return ws.reconstruct(OCTANT, iterations=8, resolution=20, bulge=0.5, device="cpu")
+    return ws.reconstruct(OCTANT, iterations=8, resolution=20, device="cpu")
 
 
 def test_support_is_the_distance_to_the_nearest_constraint_in_voxels(octant_result):

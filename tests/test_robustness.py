@@ -14,8 +14,9 @@ from warpspec.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 OCTANT = ROOT / "examples" / "scenes" / "octant.json"
-FAST = ["--resolution", "16", "--iterations", "8", "--bulge", "0.5", "--device", "cpu"]
-OPTIONS = {"resolution": 16, "bulge": 0.5, "device": "cpu"}
+FAST = ["--resolution", "16", "--iterations", "8", "--start", "paper", "--bulge", "0.5",
+        "--device", "cpu"]
+OPTIONS = {"resolution": 16, "start": "paper", "bulge": 0.5, "device": "cpu"}
 
 
 @pytest.fixture
@@ -205,7 +206,7 @@ def test_cpu_runs_are_bitwise_reproducible():
     scene = ws.Scene.load(OCTANT)
 
     def run():
-        solver = ws.Reconstructor(scene, resolution=20, bulge=0.5, device="cpu")
+        solver = ws.Reconstructor(scene, resolution=20, start="paper", bulge=0.5, device="cpu")
         solver.run(15)
         result = solver.result()
         history = [{k: v for k, v in row.items() if k != "seconds"} for row in result.history]

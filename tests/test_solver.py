@@ -28,7 +28,7 @@ def true_hits(scene):
 
 
 def test_point_term_alone_never_increases_point_energy(octant, device):
-    solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, fit_iterations=0,
+    solver = ws.Reconstructor(octant, resolution=32, start="paper", bulge=0.5,
                               reinit_every=0, point_weight=1.0, device=device)
     energies = [solver.measures()["energy_point"]]
     for _ in range(30):
@@ -43,7 +43,7 @@ def test_point_term_alone_never_increases_point_energy(octant, device):
 def test_normal_term_alone_never_increases_normal_energy(octant, device):
     # The bent plane, with its normals off by ~0.08 (1 - N.n): the normal term must lower E_N
     # at every step while the intersections stay fixed.
-    solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, fit_iterations=0,
+    solver = ws.Reconstructor(octant, resolution=32, start="paper", bulge=0.5,
                               reinit_every=0, device=device)
     energies = [solver.measures()["energy_normal"]]
     for _ in range(40):
@@ -55,7 +55,7 @@ def test_normal_term_alone_never_increases_normal_energy(octant, device):
 
 
 def test_full_run_lowers_total_energy(octant, device):
-    solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, fit_iterations=0,
+    solver = ws.Reconstructor(octant, resolution=32, start="paper", bulge=0.5,
                               device=device)
     history = solver.run(100, measure_every=0)
     first, last = history[0], history[-1]
@@ -69,8 +69,8 @@ def test_full_run_lowers_total_energy(octant, device):
 
 @pytest.mark.slow
 def test_octant_end_to_end_meets_the_papers_figures(octant):
-    solver = ws.Reconstructor(octant, resolution=64, alpha=0.01, bulge=0.5,
-                              gaussian_width=1.0, device="cpu")
+    solver = ws.Reconstructor(octant, resolution=64, alpha=0.01, gaussian_width=1.0,
+                              device="cpu")
     solver.run(300, measure_every=10)
     result = solver.result()
     last = result.history[-1]
@@ -195,7 +195,8 @@ def test_a_run_that_loses_its_surface_says_so(octant):
 def test_narrow_band_gives_the_dense_result(octant, device):
     phis = []
     for band in (None, 4.0):
-        solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, narrow_band=band,
+        solver = ws.Reconstructor(octant, resolution=32, start="paper", bulge=0.5,
+                                  narrow_band=band,
                                   device=device)
         solver.run(40, measure_every=0)
         phis.append(solver.phi.numpy())
@@ -209,7 +210,8 @@ def test_without_reinitialisation_every_node_is_updated(octant):
     # a band is only rebuilt when phi is redistanced: with reinit_every=0 the step is dense
     phis = []
     for band in (None, 4.0):
-        solver = ws.Reconstructor(octant, resolution=24, bulge=0.5, narrow_band=band,
+        solver = ws.Reconstructor(octant, resolution=24, start="paper", bulge=0.5,
+                                  narrow_band=band,
                                   reinit_every=0, device="cpu")
         solver.run(30)
         phis.append(solver.phi.numpy())
@@ -219,7 +221,8 @@ def test_without_reinitialisation_every_node_is_updated(octant):
 def test_graph_replay_gives_the_launch_by_launch_result(octant, device):
     phis = []
     for graph in (False, True):
-        solver = ws.Reconstructor(octant, resolution=24, bulge=0.5, graph=graph, device=device)
+        solver = ws.Reconstructor(octant, resolution=24, start="paper", bulge=0.5, graph=graph,
+                                  device=device)
         solver.run(25, measure_every=5)
         phis.append(solver.phi.numpy())
     np.testing.assert_array_equal(phis[0], phis[1])
@@ -245,7 +248,7 @@ def test_a_non_finite_phi_stops_the_run_and_keeps_the_last_good_state(octant):
 def test_returned_arrays_do_not_change_when_the_solver_goes_on(octant):
     # On the CPU, wp.array.numpy() is a view of the device buffer: what the solver hands out
     # must be a copy.
-    solver = ws.Reconstructor(octant, resolution=20, bulge=0.5, device="cpu")
+    solver = ws.Reconstructor(octant, resolution=20, start="height", bulge=0.5, device="cpu")
     bent, start = solver.bent_phi.copy(), solver.initial_phi.copy()
     result = solver.result()
     phi, snapshot = result.phi.copy(), solver.phi_numpy()
@@ -263,7 +266,7 @@ def test_cpu_and_cuda_agree_near_the_surface(octant):
     # the two devices agree to within 1e-3 voxel near the surface after 50 iterations.
     runs = {}
     for device in ("cpu", "cuda:0"):
-        solver = ws.Reconstructor(octant, resolution=32, bulge=0.5, device=device)
+        solver = ws.Reconstructor(octant, resolution=32, start="paper", bulge=0.5, device=device)
         solver.run(50, measure_every=10)
         runs[device] = (solver.phi.numpy(), solver.history[-1], solver.grid.spacing)
     (cpu, cpu_m, h), (gpu, gpu_m, _) = runs["cpu"], runs["cuda:0"]

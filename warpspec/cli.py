@@ -56,6 +56,7 @@ from ._cli_common import (
     positive_int,
 )
 from .errors import InputError, ReconstructionError, SceneError
+from .options import STARTS
 
 __all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"]
 
@@ -68,6 +69,7 @@ SCENE_FORMATS = (".json",)
 _FLAGS = {
     "alpha": "--alpha",
     "bulge": "--bulge",
+    "start": "--start",
     "bulge_cap": "--bulge-cap",
     "reinit_every": "--reinit-every",
     "resolution": "--resolution",
@@ -308,6 +310,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             scene,
             resolution=64 if args.resolution is None else args.resolution,
             alpha=args.alpha,
+            start=args.start,
             bulge=args.bulge,
             bulge_cap=args.bulge_cap,
             device=device,
@@ -599,9 +602,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="iterations of the flow (default 300)")
     rec.add_argument("--alpha", type=non_negative, default=0.01,
                      help="weight of the smoothness term (default 0.01)")
+    rec.add_argument("--start", choices=STARTS, default=STARTS[0],
+                     help="starting surface: implicit (default: any shape, fitted to the data "
+                          "coarse to fine), height (a height field over the plane through the "
+                          "points) or paper (that plane, bent by --bulge)")
     rec.add_argument("--bulge", type=finite, default=0.0,
-                     help="bend the initial plane toward the cameras by this times the "
-                          "distance to the nearest point (default 0)")
+                     help="with --start paper or height: bend the initial plane toward the "
+                          "cameras by this times the distance to the nearest point (default 0)")
     rec.add_argument("--bulge-cap", type=positive, default=None,
                      help="cap on that distance, in voxel widths (default: none)")
     rec.add_argument("--reinit-every", type=non_negative_int, default=10,

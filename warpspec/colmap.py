@@ -1316,7 +1316,7 @@ def import_colmap(
 
 def _rays(matrices: np.ndarray, cams: np.ndarray, pixels: np.ndarray
           ) -> tuple[np.ndarray, np.ndarray]:
-    """Origins and unit directions of pixel rays (DESIGN section 2)."""
+    """Origins and unit directions of pixel rays (docs/DESIGN.md section 2)."""
     if len(cams) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
     M = matrices[cams, :, :3]

@@ -1,4 +1,4 @@
-"""Signed distance reinitialisation and distance to a point set, on NumPy arrays (DESIGN 6).
+"""Signed distance and distance to a point set on NumPy arrays (docs/DESIGN.md section 6).
 
 Thin NumPy-level wrappers around :class:`warpspec.kernels.redistance.Redistancer`: copy to the
 device, run the fast sweeps, copy back.

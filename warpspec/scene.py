@@ -1,4 +1,4 @@
-"""The version-1 scene (DESIGN.md section 10): loaded, validated and turned into geometry.
+"""The version-1 scene (docs/DESIGN.md section 10): loaded, validated and turned into geometry.
 
 A :class:`Scene` holds cameras, specularities (a pixel in a camera where a highlight is seen),
 point constraints, the light model and an optional domain box. Every field is validated when the
@@ -568,7 +568,7 @@ class Scene:
 
     @classmethod
     def from_dict(cls, data: Mapping) -> Scene:
-        """Build a scene from its JSON object (DESIGN.md section 10).
+        """Build a scene from its JSON object (docs/DESIGN.md section 10).
 
         Unknown keys are ignored with a :class:`SceneWarning`, except those starting with ``_``.
 

@@ -42,6 +42,7 @@ from .kernels.differences import (
 from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_measures
 from .kernels.redistance import Redistancer
 from .mesh import supported_components, triangulate, write_ply
+from .options import STARTS
 from .scene import Scene
 from .verdict import SUPPORT_RADIUS, Verdict, assess
 
@@ -51,7 +52,6 @@ if TYPE_CHECKING:
 __all__ = ["Reconstructor", "Result", "reconstruct"]
 
 REINIT_BAND = "gradient"
-STARTS = ("implicit", "height", "paper")
 FULL_REINIT_EVERY = 5
 
 MEASURE_KEYS = (
@@ -429,7 +429,7 @@ class Reconstructor:
         init_iterations: int = 0,
         fit_iterations: int = 5,
         fit_degree: int = 4,
-        start: str = "implicit",
+        start: str = STARTS[0],
         margin: float = 0.2,
         narrow_band: float | None = 4.0,
         graph: bool | None = None,
@@ -460,6 +460,9 @@ class Reconstructor:
         if start not in STARTS:
             raise SceneError(f"start: must be one of {', '.join(STARTS)}, got {start!r}")
         self.start = start
+        if start == "implicit" and (self.bulge != 0.0 or bulge_cap is not None):
+            raise InputError("bulge: bends the paper's plane only; the implicit start needs no "
+                             "bulge (pass start='paper' or 'height' to use one)")
         self.fit_report = None
         margin = _real("margin", margin, low=0.0)
         self.narrow_band = None if narrow_band is None else _real(

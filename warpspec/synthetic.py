@@ -2,12 +2,12 @@
 
 A synthetic scene is a known surface, a light, and cameras placed so that each sees a specular
 highlight at a known surface point: the camera sits on the direction into which the surface
-mirrors the light. The scene is written in the version-1 scene format (DESIGN section 10) and
-kept together with its ground truth (specular points, normals, a truth mesh).
+mirrors the light. The scene is written in the version-1 scene format (docs/DESIGN.md section
+10) and kept together with its ground truth (specular points, normals, a truth mesh).
 
-Geometry follows DESIGN section 2: ``P = K [R | t]``, centre ``c = -M^-1 p4``, the ray of pixel
-``q`` has direction ``normalize(sign(det M) M^-1 q)`` from the camera into the scene, and the
-reflection law is ``N = normalize(L - r)`` with ``L`` the unit vector toward the light. Cameras
+Geometry follows docs/DESIGN.md section 2: ``P = K [R | t]``, centre ``c = -M^-1 p4``, the ray
+of pixel ``q`` has direction ``normalize(sign(det M) M^-1 q)`` from the camera into the scene, and
+the reflection law is ``N = normalize(L - r)`` with ``L`` the unit vector toward the light. Cameras
 follow the usual computer-vision frame (x right, y down, z forward); pixel ``(u, v)`` lies in
 the image when ``0 <= u <= width - 1`` and ``0 <= v <= height - 1``.
 
@@ -1313,7 +1313,7 @@ class CameraLight:
 
 
 LightModel = DirectionalLight | PointLight | CameraLight
-"""Any of the three light models of DESIGN section 2."""
+"""Any of the three light models of docs/DESIGN.md section 2."""
 
 
 def as_light(light: LightModel | dict) -> LightModel:
@@ -1935,7 +1935,7 @@ class SyntheticScene:
 
     Attributes:
         name: Scene name.
-        scene_dict: The scene, JSON-ready (DESIGN section 10).
+        scene_dict: The scene, JSON-ready (docs/DESIGN.md section 10).
         surface: The true surface.
         truth_points: True specular points ``(M, 3)``, one per specularity, in file order.
         truth_normals: True outward unit normals at ``truth_points`` ``(M, 3)``.

@@ -1,6 +1,6 @@
 """Finite differences on the level set: gradients, curvature and the flows built from them.
 
-Conventions (DESIGN.md section 3): ``phi < 0`` inside, node ``(i, j, k)`` at
+Conventions (docs/DESIGN.md section 3): ``phi < 0`` inside, node ``(i, j, k)`` at
 ``origin + h * (i, j, k)``, zero normal derivative at the boundary (indices are clamped).
 
 The solver's iteration is one fused kernel, :func:`flow_step`, that evaluates

@@ -2,7 +2,7 @@
 
 A ray is clipped to the domain box, marched with steps of at most ``h/2`` on trilinearly
 interpolated ``phi``, and its first crossing from ``phi > 0`` to ``phi <= 0`` is refined by
-bisection (DESIGN.md section 5). The constraint normal is then computed for the light model of
+bisection (docs/DESIGN.md section 5). The constraint normal is then computed for the light model of
 its camera: ``N = normalize(L - r)``, ``L`` toward the light (a point light is evaluated at the
 intersection), or ``N = -r`` for a flash at the camera.
 """

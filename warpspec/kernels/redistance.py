@@ -1,4 +1,4 @@
-"""Reinitialisation of a level set by fast sweeping, and distance to a point set (DESIGN 6).
+"""Reinitialisation by fast sweeping, and distance to a point set (docs/DESIGN.md section 6).
 
 Distances are computed in index units (``h = 1``) in a scratch array and scaled by the spacing
 only when written back, so the sweeps never see the spacing. Two ways to run the sweeps share
