@@ -562,3 +562,12 @@ def test_shape_example_files_are_current(scenes, name):
     assert truth["closed"] == s.closed and truth["euler"] == s.euler
     mesh = trimesh.load(EXAMPLES / f"{name}.ply", process=True)
     assert mesh.is_watertight == s.closed and mesh.euler_number == s.euler
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_truth_json_states_the_truth_meshs_topology(scenes, name):
+    s = scenes[name]
+    mesh = s.truth_mesh()
+    mesh.merge_vertices()
+    d = s.truth_dict()
+    assert d["closed"] == mesh.is_watertight and d["euler"] == mesh.euler_number
