@@ -30,6 +30,7 @@ Examples:
     python examples/any_shape.py                                   # every scene, seeds 0 1 2
     python examples/any_shape.py --scene torus wrap --seeds 0 --resolution 32
     python examples/any_shape.py --outliers 0.1 0.25 --noise 0.5 --json rows.json
+    python examples/any_shape.py --write-scenes examples/scenes      # the example files
 """
 
 from __future__ import annotations
@@ -51,6 +52,17 @@ from warpspec.synthetic import SyntheticScene, make_scene
 SHAPES = ("sphere-around", "ellipsoid-around", "torus", "bottle", "wrap", "freeform",
           "point-light")
 PAPER = ("octant", "ellipsoid-cap", "car-window", "wine-bottle")
+# Truth meshes written next to the example scene files: coarse, to keep the folder small
+# (``warpspec synth NAME --truth MESH`` writes the full-resolution one).
+PLY_OPTIONS = {
+    "sphere-around": {"subdivisions": 3},
+    "ellipsoid-around": {"subdivisions": 3},
+    "torus": {"sections": 48, "tube": 16},
+    "bottle": {"sections": 32},
+    "wrap": {"sections": 32},
+    "freeform": {"resolution": 32},
+    "point-light": {"resolution": 32},
+}
 COLUMNS = ("scene", "seed", "variant", "highlights", "points", "truth->mesh (h)",
            "mesh->truth (h)", "watertight", "Euler", "vs clean (h)", "misses", "time (s)")
 
@@ -119,6 +131,19 @@ def table_row(row: dict) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def write_scenes(folder: Path, seed: int) -> None:
+    """Write each shape-class scene (NAME.json, NAME.truth.json, a coarse NAME.ply)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in SHAPES:
+        synthetic = make_scene(name, seed=seed)
+        synthetic.to_json(folder / f"{name}.json")
+        text = json.dumps(synthetic.truth_dict(), indent=1) + "\n"
+        (folder / f"{name}.truth.json").write_text(text)
+        synthetic.truth_mesh(**PLY_OPTIONS[name]).export(folder / f"{name}.ply")
+        print(f"{name}: {len(synthetic.truth_points)} highlights, {len(synthetic.points)} "
+              f"points -> {folder / name}.json, .truth.json, .ply")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.splitlines()[0],
@@ -139,7 +164,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--device", default=None, help="Warp device (default: CUDA if seen)")
     parser.add_argument("--json", type=Path, default=None, metavar="FILE",
                         help="also write the rows to this file (.json)")
+    parser.add_argument("--write-scenes", type=Path, default=None, metavar="DIR",
+                        help="only write the shape-class scenes (first seed) into DIR, with "
+                             "their truth and a coarse truth mesh, and stop")
     args = parser.parse_args(argv)
+    if args.write_scenes is not None:
+        write_scenes(args.write_scenes, args.seeds[0] if args.seeds else 0)
+        return 0
 
     names = list(args.scene) if args.scene else [*SHAPES, *PAPER]
     unknown = [n for n in names if n not in SHAPES + PAPER]

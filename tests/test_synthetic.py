@@ -541,3 +541,33 @@ def test_synth_command_writes_every_shape_scene(tmp_path, capsys):
             code = exc.code
         assert code == 2 and message in capsys.readouterr().err
     assert not (tmp_path / "x.json").exists()
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_shape_example_files_are_current(scenes, name):
+    from warpspec import Scene
+
+    s = scenes[name]
+    path = EXAMPLES / f"{name}.json"
+    assert path.exists(), "run examples/any_shape.py --write-scenes examples/scenes"
+    loaded = Scene.load(path)
+    assert loaded.num_specularities == len(s.truth_points)
+    written = json.loads(path.read_text())
+    np.testing.assert_allclose([sp["pixel"] for sp in written["specularities"]], s.pixels,
+                               atol=1e-9)
+    np.testing.assert_allclose([c["P"] for c in written["cameras"]],
+                               [c["P"] for c in s.scene_dict["cameras"]], rtol=1e-12, atol=1e-9)
+    truth = json.loads((EXAMPLES / f"{name}.truth.json").read_text())
+    np.testing.assert_allclose(truth["truth_points"], s.truth_points, atol=1e-12)
+    assert truth["closed"] == s.closed and truth["euler"] == s.euler
+    mesh = trimesh.load(EXAMPLES / f"{name}.ply", process=True)
+    assert mesh.is_watertight == s.closed and mesh.euler_number == s.euler
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_truth_json_states_the_truth_meshs_topology(scenes, name):
+    s = scenes[name]
+    mesh = s.truth_mesh()
+    mesh.merge_vertices()
+    d = s.truth_dict()
+    assert d["closed"] == mesh.is_watertight and d["euler"] == mesh.euler_number
