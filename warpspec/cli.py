@@ -65,6 +65,9 @@ METRIC_FORMATS = (".csv", ".json")
 PICTURE_FORMATS = (".png", ".pdf", ".svg")
 SCENE_FORMATS = (".json",)
 
+_REJECTED_SHOWN = 5
+"""Rejected highlights named in the summary; the rest are counted (``Result.rejected`` has all)."""
+
 # Names of Python options in the API's messages and the flags that set them.
 _FLAGS = {
     "alpha": "--alpha",
@@ -405,6 +408,15 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         if last["misses"]:
             _say(f"warning: {last['misses']} of {scene.num_specularities} specular rays miss "
                  "the final surface; their normals were not used")
+        if result.rejected:
+            shown = ", ".join(
+                f"#{r['index']} (camera {r['camera']}, pixel {r['pixel'][0]:.1f} "
+                f"{r['pixel'][1]:.1f}, {_fmt(r['residual_deg'], '.0f')} deg)"
+                for r in result.rejected[:_REJECTED_SHOWN])
+            more = len(result.rejected) - _REJECTED_SHOWN
+            _say(f"{len(result.rejected)} of {scene.num_specularities} highlights rejected as "
+                 f"inconsistent with the others: {shown}" + (f" and {more} more" if more > 0
+                                                              else ""))
         if verdict.supported:
             _say(verdict.summary())
         begun = f" (resumed from {resume})" if resume is not None else ""

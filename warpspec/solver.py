@@ -23,7 +23,7 @@ from ._atomic import atomic_write, check_size
 from ._runtime import init, resolve_device
 from .errors import InputError, ReconstructionError, SceneError
 from .grid import MAX_NODES, Grid
-from .implicit import ImplicitStart
+from .implicit import ImplicitStart, rejected_summary
 from .initial import fit_height_field, plane_frame
 from .kernels.constraints import (
     launch_bend,
@@ -87,6 +87,10 @@ class Result:
         support: Per vertex, the distance to the nearest constraint (a ray's hit or a point)
             in voxel widths, ``(n,)``; written to PLY as the vertex property ``support``.
         verdict: Whether the data supports the result (:class:`warpspec.verdict.Verdict`).
+        rejected: The highlights the start rejected as inconsistent with the others (a false
+            detection, another light's reflection), one dict each: ``index`` (in the scene's
+            specularities), ``camera``, ``pixel`` and ``residual_deg`` (the angle between its
+            normal and the fitted surface's); they take no part in the flow.
     """
 
     vertices: np.ndarray
@@ -97,6 +101,7 @@ class Result:
     hits: np.ndarray | None = None
     support: np.ndarray | None = None
     verdict: Verdict | None = None
+    rejected: list[dict] = field(default_factory=list)
     _mesh: object = field(default=None, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
@@ -894,8 +899,10 @@ class Reconstructor:
                              self.scene.points.reshape(-1, 3)])
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing)
+        rejected = ([] if self.fit_report is None
+                    else rejected_summary(self.fit_report, self.scene))
         result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
-                        history=list(self.history), hits=hits)
+                        history=list(self.history), hits=hits, rejected=rejected)
         result.assess(self.scene)
         return result
 
