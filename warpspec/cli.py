@@ -331,7 +331,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         solver.run(args.iterations, measure_every=measure_every, callback=progress)
     finally:
         progress.close()
-    result = solver.result()
+    result = solver.result(crop=args.crop == "auto")
     verdict = result.verdict
     if not verdict.supported and not args.keep_unsupported:
         _say(f"{verdict.summary()}; nothing was written (--keep-unsupported writes the "
@@ -393,7 +393,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
                 hits=result.hits, normals=normals,
                 cameras=scene.camera_centres(),
                 title=f"{Path(args.scene).name}: {len(mesh.faces)} faces"
-                      f"{f' (cropped: {args.crop})' if args.crop else ''}"))
+                      f"{f' (cropped: {args.crop})' if args.crop != 'none' else ''}"))
         if plot is not None:
             from .plots import plot_history
 
@@ -638,10 +638,12 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--save-phi", default=None, help="keep the level set and its grid (.npz)")
     rec.add_argument("--resume", default=None, help="continue from a level set saved with "
                                                     "--save-phi (its grid is used)")
-    rec.add_argument("--crop", default=None, choices=["hull", "support"],
-                     help="hull: keep only the faces inside the hull of the constraints; "
-                          "support: only the faces within 3 voxels of a constraint (a ray's "
-                          "hit or a point), the part the data determines")
+    rec.add_argument("--crop", default="auto", choices=["auto", "none", "hull", "support"],
+                     help="auto (default): crop an open surface to where the data reaches "
+                          "(the convex hull of the rays' hits and the points, grown by 3 "
+                          "voxels), keep a closed one whole; none: the whole zero set; hull: "
+                          "the faces inside the hull of the constraints; support: the faces "
+                          "within 3 voxels of a constraint (a ray's hit or a point)")
     rec.add_argument("--keep-unsupported", action="store_true",
                      help="write the outputs even when the data does not support the result "
                           "(most rays miss, the normals or the points disagree with the "

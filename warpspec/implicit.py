@@ -35,12 +35,21 @@ __all__ = ["FitReport", "ImplicitStart", "first_guess", "level_ladder", "ray_con
 COARSEST = 16
 """Cells along the longest side of the coarsest level of the ladder."""
 QUADRIC_DEG = 3.0
-"""The quadric alone is the start when 90% of the accepted normals are met this closely..."""
+"""The quadric alone is the start when at least QUADRIC_SHARE of the rays' normals are met this
+closely,..."""
+QUADRIC_SHARE = 0.7
+QUADRIC_AMBIGUOUS = 0.05
+"""...no more than this share are off by between QUADRIC_DEG and REJECT_DEG (false highlights
+are further off; a shape that is not a quadric falls away gradually),..."""
 QUADRIC_POINT_VOXELS = 0.25
 """...and every point lies within this many voxel widths of it."""
-LIMIT_DEG = (30.0, 30.0, 30.0)
-"""Smallest Tukey limit of the robust weights on the levels of the ladder (then the last):
-a coarse grid cannot follow every legitimate normal, a fine one can."""
+REJECT_DEG = 10.0
+"""A ray whose normal the first, soft grid fit misses by more than this, and by more than
+REJECT_SIGMAS robust standard deviations of all rays' misses, is rejected as false."""
+REJECT_SIGMAS = 4.0
+LIMIT_DEG = 30.0
+"""Smallest Tukey limit of the grid fit's soft robust weights: the fit cannot follow every
+legitimate normal before it has converged, so only normals this far off lose all weight."""
 ROUNDS_COARSE = 4
 """Intersect-and-refit rounds on each coarse level."""
 ROUNDS_FINE = 2
@@ -302,6 +311,7 @@ class ImplicitStart:
         self.value = wp.zeros(m, dtype=float, device=device)
         self.weights = np.ones(m)
         self.residual = np.zeros(m)
+        self.excluded = np.zeros(m, dtype=bool)
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -320,48 +330,79 @@ class ImplicitStart:
         ladder: list[int] = []
         if self._quadric_suffices():
             self._quadric_field(self.grid, out)
+            self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
         else:
             if guess.kind == "plane":
                 # seen from one side: the prior is a quadratic height field over the plane,
                 # which has one sheet (a general quadric may close a second one in the domain)
-                self.quadric, self.weights, self.residual = Q.fit_quadric(
+                self.quadric, _, _ = Q.fit_quadric(
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))
             ladder = level_ladder(max(self.grid.shape) - 1)
-            previous: _Level | None = None
-            for index, res in enumerate(ladder):
-                last = index == len(ladder) - 1
-                grid = self.grid if last else Grid.from_bounds(lo, hi, resolution=res)
-                level = _Level(grid, self.device)
-                self._quadric_field(grid, level.p)  # the prior, in a scratch field
-                level.set_prior(level.p)
-                if previous is None:
-                    wp.copy(level.f, level.p)
-                else:
-                    wp.launch(K.resample, dim=grid.shape,
-                              inputs=[previous.f, previous.origin, previous.h, level.origin,
-                                      level.h], outputs=[level.f], device=self.device)
-                self.limit_deg = LIMIT_DEG[min(index, len(LIMIT_DEG) - 1)]
-                n_rounds = ROUNDS_FINE if last else ROUNDS_COARSE
-                for _ in range(n_rounds):
-                    cg.append(self._round(level, CG_ITERATIONS_FINE if last else CG_ITERATIONS))
-                rounds.append(n_rounds)
-                previous = level
+            # First pass: every ray, soft robust weights. Then the rays whose normals the fit
+            # cannot meet are rejected, and the ladder is fitted again without them: a false
+            # highlight keeps some weight in a soft fit, and none after.
+            self.excluded = np.zeros(self.m, dtype=bool)
+            previous = self._ladder(ladder, rounds, cg)
+            outliers = self._outliers()
+            if outliers.any():
+                self.excluded = outliers
+                previous = self._ladder(ladder, rounds, cg)
             self._anchor(previous)
             self._update_weights(previous)
+            self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
+                                                                 != K.ANCHOR_NONE)
             wp.copy(out, previous.f)
-        self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
                          cg_iterations=cg)
 
-    def _quadric_suffices(self) -> bool:
-        """Whether the quadric meets every accepted normal and point to within noise."""
-        live = self.weights > 0.0
+    def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
+        """Fit on every level of the ladder, each started from the one below."""
+        lo, hi = self.grid.origin, self.grid.upper
+        previous: _Level | None = None
+        self.weights = np.where(self.excluded, 0.0, 1.0)
+        for index, res in enumerate(ladder):
+            last = index == len(ladder) - 1
+            grid = self.grid if last else Grid.from_bounds(lo, hi, resolution=res)
+            level = _Level(grid, self.device)
+            self._quadric_field(grid, level.p)  # the prior, in a scratch field
+            level.set_prior(level.p)
+            if previous is None:
+                wp.copy(level.f, level.p)
+            else:
+                wp.launch(K.resample, dim=grid.shape,
+                          inputs=[previous.f, previous.origin, previous.h, level.origin,
+                                  level.h], outputs=[level.f], device=self.device)
+            n_rounds = ROUNDS_FINE if last else ROUNDS_COARSE
+            for _ in range(n_rounds):
+                cg.append(self._round(level, CG_ITERATIONS_FINE if last else CG_ITERATIONS))
+            rounds.append(n_rounds)
+            previous = level
+        return previous
+
+    def _outliers(self) -> np.ndarray:
+        """Rays whose normal the soft fit misses by more than noise allows."""
+        live = (self.kind.numpy() != K.ANCHOR_NONE)
         if not live.any():
+            return np.zeros(self.m, dtype=bool)
+        sigma = 1.4826 * float(np.median(self.residual[live]))
+        return live & (self.residual > max(REJECT_SIGMAS * sigma, REJECT_DEG))
+
+    def _quadric_suffices(self) -> bool:
+        """Whether the quadric is the shape.
+
+        It must meet most normals within noise, the rest must be clearly false (far off, not
+        a gradual falling away), and it must hold the points.
+        """
+        _, _, inside = self.quadric.intersect(*self.scene.rays(), self.grid.origin,
+                                              self.grid.upper)
+        if not inside.any():
             return False
-        within = float(np.percentile(self.residual[live], 90)) <= QUADRIC_DEG
+        res = self.residual[inside]
+        within = np.mean(res <= QUADRIC_DEG) >= QUADRIC_SHARE
+        within &= np.mean((res > QUADRIC_DEG) & (res <= REJECT_DEG)) <= QUADRIC_AMBIGUOUS
         pts = self.scene.points.reshape(-1, 3)
         if len(pts):
             g = np.linalg.norm(self.quadric.gradient(pts), axis=1)
@@ -402,7 +443,8 @@ class ImplicitStart:
         live = kind != K.ANCHOR_NONE
         angle[~live] = 180.0
         self.residual = angle
-        self.weights = Q.robust_weights(angle, live, limit_deg=self.limit_deg)
+        self.weights = Q.robust_weights(angle, live, limit_deg=LIMIT_DEG)
+        self.weights[self.excluded] = 0.0
 
     def _round(self, level: _Level, iterations: int) -> int:
         """Intersect, reweigh, build the samples, fit; returns the CG iterations."""

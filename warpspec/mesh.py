@@ -309,3 +309,51 @@ def supported_components(vertices: np.ndarray, faces: np.ndarray, anchors: np.nd
     new_index = np.cumsum(keep_vertex) - 1
     keep_face = keep_vertex[faces[:, 0]]
     return vertices[keep_vertex], new_index[faces[keep_face]]
+
+
+def is_open(faces: np.ndarray) -> bool:
+    """Whether a triangle mesh has a border (an edge used by one face only)."""
+    faces = np.asarray(faces)
+    if len(faces) == 0:
+        return False
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
+                    axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool(np.any(counts == 1))
+
+
+def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *,
+                      margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the faces whose centres lie in the anchors' 3-D convex hull grown by ``margin``.
+
+    What an open surface's data determines: between the constraints the fit interpolates,
+    beyond their hull it extrapolates (the back of a cylinder seen from one side, the rim of a
+    patch). A centre is inside when no facet plane of the hull has it further than ``margin``
+    on its outer side. Flat or too few anchors (no 3-D hull): nothing is cropped.
+
+    Returns:
+        The kept vertices and faces (re-indexed).
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces)
+    if len(anchors) < 4 or len(faces) == 0:
+        return vertices, faces
+    centre = anchors.mean(axis=0)
+    scale = float(np.max(np.abs(anchors - centre))) or 1.0
+    try:
+        hull = ConvexHull((anchors - centre) / scale)
+    except (QhullError, ValueError):
+        return vertices, faces
+    tri = np.asarray(vertices)[faces]
+    x = (tri.mean(axis=1) - centre) / scale
+    outside = (x @ hull.equations[:, :3].T + hull.equations[:, 3]).max(axis=1)
+    keep = outside <= margin / scale
+    if not keep.any() or keep.all():
+        return vertices, faces
+    kept = faces[keep]
+    used = np.unique(kept)
+    index = np.full(len(vertices), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    return np.asarray(vertices)[used], index[kept]

@@ -26,8 +26,10 @@ error."""
 MISS_WEIGHT = 0.3
 """Relative weight of a ray that misses the current quadric."""
 LIMIT_DEG = 30.0
-"""Smallest Tukey limit of the quadric's robust weights: a quadric only approximates most
-shapes, so only normals this far from it can be rejected at this stage."""
+"""Smallest Tukey limit of the quadric's robust weights in the first robust round..."""
+FINAL_LIMIT_DEG = 5.0
+"""...and in the last: the quadric is kept as the start only if it meets most normals within
+noise (see :mod:`warpspec.implicit`), and then the others are false."""
 RIDGE = 1e-6
 """Ridge on the coefficients (normalised coordinates): keeps the system regular."""
 
@@ -245,7 +247,11 @@ def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxe
         angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
         angle[~inside] = 180.0
         if round_ >= robust_from:
-            weights = robust_weights(angle, inside, limit_deg=LIMIT_DEG)
+            # the floor of the limit falls from LIMIT_DEG to FINAL_LIMIT_DEG over the rounds:
+            # on a quadric the legitimate normals end within noise and the false ones apart
+            t = (round_ - robust_from) / max(ROUNDS - 1 - robust_from, 1)
+            floor = LIMIT_DEG * (FINAL_LIMIT_DEG / LIMIT_DEG) ** t
+            weights = robust_weights(angle, inside, limit_deg=floor)
         else:
             weights = inside.astype(float)
         w = weights * np.where(crossing, 1.0, MISS_WEIGHT)

@@ -41,7 +41,13 @@ from .kernels.differences import (
 )
 from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_measures
 from .kernels.redistance import Redistancer
-from .mesh import supported_components, triangulate, write_ply
+from .mesh import (
+    crop_to_data_hull,
+    is_open,
+    supported_components,
+    triangulate,
+    write_ply,
+)
 from .options import STARTS
 from .scene import Scene
 from .verdict import SUPPORT_RADIUS, Verdict, assess
@@ -882,8 +888,15 @@ class Reconstructor:
         """A host copy of the current level set."""
         return self.phi.numpy().copy()
 
-    def result(self) -> Result:
+    def result(self, *, crop: bool = True) -> Result:
         """The current surface as a :class:`Result` (mesh, level set, grid, history).
+
+        Args:
+            crop: Crop an open surface to where the data reaches: the faces inside the convex
+                hull of the rays' hits and the points, grown by three voxels
+                (:func:`warpspec.mesh.crop_to_data_hull`); beyond it the surface is the fit's
+                extrapolation, which no constraint speaks for. A closed surface is never
+                cropped. ``False`` keeps the whole zero set.
 
         Raises:
             ReconstructionError: If the zero set has left the domain (no surface to mesh).
@@ -899,6 +912,9 @@ class Reconstructor:
                              self.scene.points.reshape(-1, 3)])
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing)
+        if crop and is_open(faces):
+            vertices, faces = crop_to_data_hull(vertices, faces, anchors,
+                                                margin=SUPPORT_RADIUS * self.grid.spacing)
         rejected = ([] if self.fit_report is None
                     else rejected_summary(self.fit_report, self.scene))
         result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
