@@ -324,12 +324,15 @@ def is_open(faces: np.ndarray) -> bool:
 
 def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *,
                       margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Keep the faces whose centres lie in the anchors' 3-D convex hull grown by ``margin``.
+    """Keep the faces whose centres lie within ``margin`` of the anchors' convex hulls.
 
     What an open surface's data determines: between the constraints the fit interpolates,
-    beyond their hull it extrapolates (the back of a cylinder seen from one side, the rim of a
-    patch). A centre is inside when no facet plane of the hull has it further than ``margin``
-    on its outer side. Flat or too few anchors (no 3-D hull): nothing is cropped.
+    beyond them it extrapolates (the back of a cylinder seen from one side, the rim of a
+    patch). A centre is kept when it lies in the anchors' 3-D convex hull and in their 2-D
+    hull on their best-fit plane, each grown by ``margin`` (the 3-D hull alone is a thin slab
+    for flat data, whose facets reach far sideways; the 2-D one alone folds a patch that wraps
+    past 180 degrees onto itself). A hull that cannot be built (too few anchors, all on a
+    line or a plane) does not crop.
 
     Returns:
         The kept vertices and faces (re-indexed).
@@ -342,14 +345,18 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
         return vertices, faces
     centre = anchors.mean(axis=0)
     scale = float(np.max(np.abs(anchors - centre))) or 1.0
-    try:
-        hull = ConvexHull((anchors - centre) / scale)
-    except (QhullError, ValueError):
-        return vertices, faces
-    tri = np.asarray(vertices)[faces]
-    x = (tri.mean(axis=1) - centre) / scale
-    outside = (x @ hull.equations[:, :3].T + hull.equations[:, 3]).max(axis=1)
-    keep = outside <= margin / scale
+    a = (anchors - centre) / scale
+    x = (np.asarray(vertices)[faces].mean(axis=1) - centre) / scale
+    m = margin / scale
+    keep = np.ones(len(faces), dtype=bool)
+    _, _, vt = np.linalg.svd(a, full_matrices=False)
+    for points, queries in ((a, x), (a @ vt[:2].T, x @ vt[:2].T)):
+        try:
+            hull = ConvexHull(points)
+        except (QhullError, ValueError):
+            continue
+        d = hull.equations.shape[1] - 1
+        keep &= (queries @ hull.equations[:, :d].T + hull.equations[:, d]).max(axis=1) <= m
     if not keep.any() or keep.all():
         return vertices, faces
     kept = faces[keep]

@@ -1,0 +1,283 @@
+"""The implicit start: the grid fit's kernels, the quadric, the first guess and the ladder."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warpspec as ws
+from warpspec import quadric as Q
+from warpspec.grid import Grid
+from warpspec.implicit import first_guess, level_ladder, ray_convergence
+from warpspec.kernels import implicit as K
+from warpspec.mesh import crop_to_data_hull, is_open, supported_components, triangulate
+from warpspec.solver import initial_plane
+from warpspec.synthetic import make_scene
+
+
+def _field(values: np.ndarray, device: str) -> wp.array:
+    return wp.array(values.astype(np.float32), dtype=float, device=device)
+
+
+def _hessian_energy_operator(f: np.ndarray, device: str, lam: float = 1.0,
+                             eps: float = 0.0) -> np.ndarray:
+    shape = f.shape
+    x = _field(f, device)
+    second = wp.zeros(shape, dtype=wp.vec3, device=device)
+    mixed = wp.zeros(shape, dtype=wp.vec3, device=device)
+    out = wp.zeros(shape, dtype=float, device=device)
+    wp.launch(K.hessian_terms, dim=shape, inputs=[x], outputs=[second, mixed], device=device)
+    wp.launch(K.hessian_adjoint, dim=shape, inputs=[second, mixed, x, lam, eps], outputs=[out],
+              device=device)
+    return out.numpy().astype(np.float64)
+
+
+def _shifted(f: np.ndarray, a: int, b: int, da: int, db: int) -> np.ndarray:
+    idx = [slice(None)] * 3  # every node along the third axis
+    idx[a] = slice(1 + da, f.shape[a] - 1 + da)
+    idx[b] = slice(1 + db, f.shape[b] - 1 + db)
+    return f[tuple(idx)]
+
+
+def _energy(f: np.ndarray) -> float:
+    """Sum over interior stencils of the squared Hessian (mixed terms twice), in NumPy."""
+    e = sum(float(np.sum(np.diff(f, n=2, axis=a) ** 2)) for a in range(3))
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        cross = 0.25 * (_shifted(f, a, b, 1, 1) - _shifted(f, a, b, 1, -1)
+                        - _shifted(f, a, b, -1, 1) + _shifted(f, a, b, -1, -1))
+        e += 2.0 * float(np.sum(cross**2))
+    return e
+
+
+def test_hessian_operator_is_the_gradient_of_the_hessian_energy(device):
+    """``D^T W D f`` is half the gradient of the energy: checked against finite differences."""
+    rng = np.random.default_rng(0)
+    f = rng.normal(size=(6, 7, 5))
+    op = _hessian_energy_operator(f, device)
+    for idx in [(0, 0, 0), (2, 3, 1), (5, 6, 4), (3, 0, 2), (1, 4, 4)]:
+        up, down = f.copy(), f.copy()
+        up[idx] += 1e-3
+        down[idx] -= 1e-3
+        numeric = (_energy(up) - _energy(down)) / 2e-3  # exact for a quadratic energy
+        assert op[idx] * 2.0 == pytest.approx(numeric, rel=1e-5, abs=1e-4)
+
+
+def test_hessian_operator_vanishes_on_linear_fields_and_not_on_quadratics(device):
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=float) for n in (8, 9, 7)), indexing="ij")
+    linear = 0.3 * i - 1.2 * j + 0.7 * k + 2.0
+    assert np.max(np.abs(_hessian_energy_operator(linear, device))) < 1e-4
+    # f = x^2: the interior second difference is 2, and the operator in the deep interior is
+    # the fourth difference of x^2 (zero) in x: the stencil sees only constant curvature.
+    quad = i**2
+    op = _hessian_energy_operator(quad, device)
+    assert np.max(np.abs(op[3:5, 2:7, 2:5])) < 1e-3
+    # at the boundary the constant curvature is not balanced: the energy pulls there
+    assert np.max(np.abs(op[0])) > 1.0
+
+
+def test_hessian_diagonal_matches_the_operator(device):
+    shape = (5, 6, 4)
+    diag = wp.zeros(shape, dtype=float, device=device)
+    wp.launch(K.hessian_diagonal, dim=shape, inputs=[wp.vec3i(*shape), 1.0, 0.0],
+              outputs=[diag], device=device)
+    d = diag.numpy()
+    for idx in [(0, 0, 0), (2, 3, 1), (4, 5, 3), (1, 1, 2)]:
+        e = np.zeros(shape)
+        e[idx] = 1.0
+        assert d[idx] == pytest.approx(_hessian_energy_operator(e, device)[idx], rel=1e-6)
+
+
+def test_ray_anchor_finds_the_sphere_and_the_nearest_approach(device):
+    grid = Grid(origin=np.full(3, -1.0), spacing=0.05, shape=(41, 41, 41))
+    f = wp.zeros(grid.shape, dtype=float, device=device)
+    wp.launch(K.sphere_field, dim=grid.shape,
+              inputs=[wp.vec3(-1.0, -1.0, -1.0), 0.05, wp.vec3(0.1, 0.0, 0.0), 0.5],
+              outputs=[f], device=device)
+    origins = np.array([[0.1, 0.0, 3.0], [0.1, 0.8, 3.0]])
+    dirs = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    anchor = wp.zeros(2, dtype=wp.vec3, device=device)
+    kind = wp.zeros(2, dtype=int, device=device)
+    normals = wp.zeros(2, dtype=wp.vec3, device=device)
+    wp.launch(K.ray_anchor, dim=2,
+              inputs=[f, wp.vec3(-1.0, -1.0, -1.0), 0.05,
+                      wp.array(origins.astype(np.float32), dtype=wp.vec3, device=device),
+                      wp.array(dirs.astype(np.float32), dtype=wp.vec3, device=device),
+                      wp.array(np.full(2, 2, dtype=np.int32), dtype=int, device=device),
+                      wp.zeros(2, dtype=wp.vec3, device=device)],
+              outputs=[anchor, kind, normals], device=device)
+    a, k, n = anchor.numpy(), kind.numpy(), normals.numpy()
+    assert k[0] == K.ANCHOR_CROSSING
+    assert np.allclose(a[0], [0.1, 0.0, 0.5], atol=2e-3)  # trilinear of an exact distance
+    assert np.allclose(n[0], [0.0, 0.0, 1.0], atol=1e-6)  # flash: N = -r
+    assert k[1] == K.ANCHOR_NEAREST  # passes 0.3 beside the sphere
+    assert abs(a[1][2] - 0.0) < 0.05  # nearest approach at the sphere's equator
+
+
+def test_quadric_intersection_is_exact():
+    sphere = Q.sphere(np.array([0.2, 0.0, 0.0]), 0.5, frame_centre=np.zeros(3), scale=2.0)
+    origins = np.array([[0.2, 0.0, 5.0], [0.2, 0.4, 5.0], [3.0, 3.0, 5.0]])
+    dirs = np.array([[0.0, 0.0, -1.0]] * 3)
+    anchors, crossing, inside = sphere.intersect(origins, dirs, np.full(3, -1.0),
+                                                 np.full(3, 1.0))
+    assert crossing.tolist() == [True, True, False]
+    assert inside.tolist() == [True, True, False]
+    assert np.allclose(anchors[0], [0.2, 0.0, 0.5], atol=1e-12)
+    assert np.allclose(anchors[1], [0.2, 0.4, 0.3], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["octant", "car-window", "sphere-around", "ellipsoid-around"])
+def test_the_quadric_fit_recovers_quadric_scenes_exactly(name):
+    synthetic = make_scene(name)
+    scene = synthetic.scene()
+    lo, hi = scene.bounds()
+    grid = Grid.from_bounds(lo, hi, resolution=64)
+    guess = first_guess(scene, grid, initial_plane(scene, grid))
+    frame, scale = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
+    start = (Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
+             if guess.kind == "sphere" else
+             Q.plane(guess.centre, guess.normal, frame_centre=frame, scale=scale))
+    quad, weights, angle = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
+    truth = synthetic.truth_points
+    dist = np.abs(quad.value(truth)) / np.linalg.norm(quad.gradient(truth), axis=1) * scale
+    assert dist.max() < 1e-3 * grid.spacing
+    assert np.all(weights > 0) and angle.max() < 0.01
+
+
+def test_the_quadric_fit_rejects_false_highlights():
+    synthetic = make_scene("sphere-around", outliers=0.25)
+    scene = synthetic.scene()
+    lo, hi = scene.bounds()
+    grid = Grid.from_bounds(lo, hi, resolution=64)
+    guess = first_guess(scene, grid, initial_plane(scene, grid))
+    frame, scale = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
+    start = Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
+    quad, weights, _ = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
+    assert np.array_equal(weights == 0, synthetic.outlier_mask)
+    inliers = synthetic.truth_points[~synthetic.outlier_mask]
+    dist = np.abs(quad.value(inliers)) / np.linalg.norm(quad.gradient(inliers), axis=1) * scale
+    assert dist.max() < 1e-3 * grid.spacing
+
+
+def test_height_map_is_a_single_sheet_over_the_plane():
+    frame = np.eye(3)  # u = x, v = y, normal z
+    T, c0 = Q.height_map(frame)
+    theta = np.array([0.5, -0.2, 0.3, 0.1, -0.4, 0.05])
+    quad = Q.Quadric(c0 + T @ theta, np.zeros(3), 1.0)
+    rng = np.random.default_rng(1)
+    uv = rng.uniform(-1, 1, size=(20, 2))
+    a, b, c, d, e, f0 = theta
+    z = a * uv[:, 0] ** 2 + b * uv[:, 0] * uv[:, 1] + c * uv[:, 1] ** 2 + d * uv[:, 0] \
+        + e * uv[:, 1] + f0
+    on = np.column_stack([uv, z])
+    assert np.allclose(quad.value(on), 0.0, atol=1e-12)
+    assert np.all(quad.value(on + [0, 0, 0.1]) > 0)  # above the sheet: outside, one sheet
+
+
+def test_first_guess_follows_where_the_cameras_stand():
+    for name, kind in (("sphere-around", "sphere"), ("torus", "sphere"), ("wrap", "sphere"),
+                       ("car-window", "plane"), ("freeform", "plane")):
+        scene = make_scene(name).scene()
+        lo, hi = scene.bounds()
+        grid = Grid.from_bounds(lo, hi, resolution=32)
+        assert first_guess(scene, grid, initial_plane(scene, grid)).kind == kind, name
+
+
+def test_ray_convergence_of_rays_through_one_point():
+    rng = np.random.default_rng(3)
+    dirs = rng.normal(size=(12, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    centre = np.array([0.3, -0.2, 1.5])
+    origins = centre - 4.0 * dirs
+    assert np.allclose(ray_convergence(origins, dirs), centre, atol=1e-9)
+    assert ray_convergence(origins[:1], dirs[:1]) is None
+
+
+def test_level_ladder():
+    assert level_ladder(64) == [16, 32, 64]
+    assert level_ladder(100) == [16, 32, 64, 100]
+    assert level_ladder(16) == [16]
+    assert level_ladder(12) == [12]
+
+
+def test_closed_object_comes_out_closed_and_accurate():
+    """A sphere seen all around, default options, a coarse grid: watertight, Euler 2."""
+    synthetic = make_scene("sphere-around")
+    result = ws.reconstruct(synthetic.scene(), resolution=32, iterations=20, device="cpu")
+    mesh = result.mesh.copy()
+    mesh.merge_vertices()
+    assert mesh.is_watertight and mesh.euler_number == 2
+    centre, radius = synthetic.surface.centre, synthetic.surface.radius
+    err = np.abs(np.linalg.norm(result.vertices - centre, axis=1) - radius)
+    assert err.mean() < 0.1 * result.grid.spacing
+    assert result.rejected == []
+
+
+def test_false_highlights_are_rejected_and_reported():
+    synthetic = make_scene("ellipsoid-around", outliers=0.25)
+    result = ws.reconstruct(synthetic.scene(), resolution=32, iterations=20, device="cpu")
+    assert sorted(r["index"] for r in result.rejected) == \
+        np.flatnonzero(synthetic.outlier_mask).tolist()
+    for r in result.rejected:
+        assert set(r) == {"index", "camera", "pixel", "residual_deg"}
+        assert r["residual_deg"] > 5.0
+
+
+def test_mesh_pieces_far_from_the_data_are_dropped():
+    grid = Grid(origin=np.zeros(3), spacing=0.1, shape=(31, 31, 31))
+    x, y, z = grid.coordinates()
+    near = np.sqrt((x - 0.8) ** 2 + (y - 1.5) ** 2 + (z - 1.5) ** 2) - 0.4
+    far = np.sqrt((x - 2.4) ** 2 + (y - 1.5) ** 2 + (z - 1.5) ** 2) - 0.3
+    phi = np.minimum(near, far)
+    v, f = triangulate(phi, grid)
+    anchors = np.array([[0.8, 1.5, 1.9], [0.4, 1.5, 1.5]])
+    kept_v, kept_f = supported_components(v, f, anchors, radius=0.3)
+    assert len(kept_f) < len(f)
+    assert np.all(np.abs(np.linalg.norm(kept_v - [0.8, 1.5, 1.5], axis=1) - 0.4) < 0.02)
+    assert not is_open(kept_f)
+
+
+def test_open_surface_is_cropped_to_the_hull_of_the_data():
+    grid = Grid(origin=np.zeros(3), spacing=0.1, shape=(31, 31, 31))
+    _, _, z = grid.coordinates()
+    v, f = triangulate(z - 1.5, grid)  # a plane through the whole domain
+    assert is_open(f)
+    anchors = np.array([[1, 1, 1.5], [2, 1, 1.5], [1, 2, 1.5], [2, 2, 1.45], [1.5, 1.5, 1.55]])
+    kept_v, kept_f = crop_to_data_hull(v, f, anchors, margin=0.1)
+    centres = kept_v[kept_f].mean(axis=1)
+    assert centres[:, :2].min() > 0.85 and centres[:, :2].max() < 2.15
+    assert len(kept_f) < len(f) / 3
+
+
+def test_conjugate_gradients_solve_the_normal_equations():
+    """The device CG meets the dense solution of the same least-squares problem."""
+    import warpspec.implicit as I
+
+    grid = Grid(origin=np.zeros(3), spacing=0.25, shape=(6, 6, 6))
+    level = I._Level(grid, wp.get_device("cpu"))
+    rng = np.random.default_rng(5)
+    xs = rng.uniform(0.3, 1.0, size=(12, 3))
+    normals = rng.normal(size=(12, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    ys = rng.uniform(0.3, 1.0, size=(3, 3))
+    f32 = np.float32
+    grads = (wp.array(xs.astype(f32), dtype=wp.vec3), wp.array(np.ones(12, f32), dtype=float))
+    nrm = wp.array(normals.astype(f32), dtype=wp.vec3)
+    values = (wp.array(ys.astype(f32), dtype=wp.vec3),
+              wp.array(np.full(3, 5.0, f32), dtype=float))
+    level.f.zero_()
+    level.solve(grads, nrm, values, 400)
+    fitted = level.f.numpy().ravel().astype(np.float64)
+    # the dense matrix, column by column, and the right-hand side (prev = 0: rhs is G^T N)
+    n = grid.size
+    A = np.zeros((n, n))
+    for c in range(n):
+        e = np.zeros(n, dtype=f32)
+        e[c] = 1.0
+        level.p.assign(wp.array(e.reshape(grid.shape), dtype=float))
+        level.apply(level.p, level.ap, grads, values)
+        A[:, c] = level.ap.numpy().ravel()
+    level.f.zero_()
+    level.solve(grads, nrm, values, 0)  # assembles rhs for f_prev = 0 without iterating
+    b = level.rhs.numpy().ravel().astype(np.float64)
+    exact = np.linalg.solve(0.5 * (A + A.T), b)
+    assert np.allclose(A, A.T, atol=1e-3 * np.abs(A).max())
+    assert np.abs(fitted - exact).max() < 1e-3 * np.abs(exact).max()
