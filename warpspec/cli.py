@@ -323,12 +323,13 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     except InputError as exc:
         raise _flag_message(exc) from None
 
-    progress = _Progress(args.iterations, enabled=not args.quiet and sys.stderr.isatty())
+    iterations = solver.default_iterations if args.iterations is None else args.iterations
+    progress = _Progress(iterations, enabled=not args.quiet and sys.stderr.isatty())
     measure_every = args.measure_every
     if measure_every is None:
         measure_every = 1 if (metrics or plot) else (10 if progress.bar is not None else 0)
     try:
-        solver.run(args.iterations, measure_every=measure_every, callback=progress)
+        solver.run(iterations, measure_every=measure_every, callback=progress)
     finally:
         progress.close()
     result = solver.result(crop=args.crop == "auto")
@@ -610,8 +611,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"mesh to write; format by extension ({', '.join(MESH_FORMATS)})")
     rec.add_argument("--resolution", type=positive_int, default=None,
                      help="cells along the longest side of the domain (default 64)")
-    rec.add_argument("--iterations", type=positive_int, default=300,
-                     help="iterations of the flow (default 300)")
+    rec.add_argument("--iterations", type=positive_int, default=None,
+                     help="iterations of the flow (default: 300 up to resolution 64, then "
+                          "300 * 64 / resolution, at least 50: the start is already solved "
+                          "coarse to fine)")
     rec.add_argument("--alpha", type=non_negative, default=0.01,
                      help="weight of the smoothness term (default 0.01)")
     rec.add_argument("--start", choices=STARTS, default=STARTS[0],
@@ -640,9 +643,10 @@ def build_parser() -> argparse.ArgumentParser:
                                                     "--save-phi (its grid is used)")
     rec.add_argument("--crop", default="auto", choices=["auto", "none", "hull", "support"],
                      help="auto (default): crop an open surface to where the data reaches "
-                          "(the convex hull of the rays' hits and the points, grown by 3 "
-                          "voxels), keep a closed one whole; none: the whole zero set; hull: "
-                          "the faces inside the hull of the constraints; support: the faces "
+                          "(the convex hull of the rays' hits and the points, grown by the "
+                          "median gap between them), keep a closed one whole; none: the whole "
+                          "zero set; hull: the faces inside the hull of the constraints; "
+                          "support: the faces "
                           "within 3 voxels of a constraint (a ray's hit or a point)")
     rec.add_argument("--keep-unsupported", action="store_true",
                      help="write the outputs even when the data does not support the result "

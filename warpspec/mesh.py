@@ -317,8 +317,9 @@ def is_open(faces: np.ndarray) -> bool:
     if len(faces) == 0:
         return False
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                    axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
+                    axis=1).astype(np.int64)
+    keys = edges[:, 0] * (int(faces.max()) + 1) + edges[:, 1]
+    _, counts = np.unique(keys, return_counts=True)
     return bool(np.any(counts == 1))
 
 

@@ -43,12 +43,14 @@ from .kernels.rays import MEASURE_SLOTS, NUM_SLOTS, launch_intersect, launch_mea
 from .kernels.redistance import Redistancer
 from .mesh import (
     crop_to_data_hull,
+    data_crop_limit,
     is_open,
     supported_components,
     triangulate,
+    triangulate_device,
     write_ply,
 )
-from .options import STARTS
+from .options import STARTS, default_iterations
 from .scene import Scene
 from .verdict import SUPPORT_RADIUS, Verdict, assess
 
@@ -59,6 +61,8 @@ __all__ = ["Reconstructor", "Result", "reconstruct"]
 
 REINIT_BAND = "gradient"
 FULL_REINIT_EVERY = 5
+FAR_CAP_MARGIN = 4.0
+"""Voxels beyond the narrow band that a full redistance still computes exactly."""
 
 MEASURE_KEYS = (
     "iteration",
@@ -597,13 +601,28 @@ class Reconstructor:
             self._fit_start(point, normal)
         self.initial_phi = self.phi.numpy().copy()
 
+    @property
+    def default_iterations(self) -> int:
+        """Iterations of the flow the automatic schedule gives this grid."""
+        return default_iterations(max(self.grid.shape) - 1)
+
+    def _far_cap(self) -> float | None:
+        """Voxels beyond which a full redistance may clamp (only the band is ever read).
+
+        With a narrow band the flow, the measures and the band's rebuild read ``phi`` only
+        within ``narrow_band`` voxels of the zero set, and the rays only its sign; capping the
+        sweeps there makes a full redistance about three times cheaper. Without a band the
+        whole grid is updated, and nothing is capped.
+        """
+        return None if self._band is None else self.narrow_band + FAR_CAP_MARGIN
+
     def _implicit_start(self, point: np.ndarray, normal: np.ndarray) -> None:
         """Fit the implicit start (any shape) and keep only the rays it accepts."""
         fit = ImplicitStart(self.scene, self.grid, self.device, (point, normal),
                             (self._ray_origin, self._ray_dir, self._light_code, self._light_vec),
                             self._points)
         self.fit_report = fit.run(self.phi)
-        self._redistancer.reinitialize(self.phi)
+        self._redistancer.reinitialize(self.phi, cap=self._far_cap())
         self._phi_version += 1
         self.bent_phi = self.phi.numpy().copy()
         self.initial_phi = self.bent_phi
@@ -715,7 +734,7 @@ class Reconstructor:
         self._check_finite()
         self._reinit_count += 1
         if self._band is None or self._reinit_count % FULL_REINIT_EVERY == 0:
-            self._redistancer.reinitialize(self.phi)
+            self._redistancer.reinitialize(self.phi, cap=self._far_cap())
         else:
             # Only the band changes between reinitialisations: redistance it alone. Far nodes
             # keep old distances, whose error grows as the surface moves; every
@@ -893,7 +912,8 @@ class Reconstructor:
 
         Args:
             crop: Crop an open surface to where the data reaches: the faces inside the convex
-                hull of the rays' hits and the points, grown by three voxels
+                hull of the rays' hits and the points, grown by the median gap between them
+                (at least three voxels)
                 (:func:`warpspec.mesh.crop_to_data_hull`); beyond it the surface is the fit's
                 extrapolation, which no constraint speaks for. A closed surface is never
                 cropped. ``False`` keeps the whole zero set.
@@ -907,14 +927,22 @@ class Reconstructor:
         used[self._active.numpy() == 0] = np.nan
         hits = np.full((self.scene.num_specularities, 3), np.nan)
         hits[self._ray_index] = used
-        vertices, faces = triangulate(phi, self.grid)
+        if self._band is not None and self.narrow_band >= 2.0:
+            # on the device, over the band's cells: no full grid through marching cubes
+            vertices, faces = triangulate_device(self.phi, self.grid, band=self._band,
+                                                 count=self._band_count)
+        else:
+            vertices, faces = triangulate(phi, self.grid)
         anchors = np.vstack([hits[np.all(np.isfinite(hits), axis=1)],
                              self.scene.points.reshape(-1, 3)])
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing)
         if crop and is_open(faces):
-            vertices, faces = crop_to_data_hull(vertices, faces, anchors,
-                                                margin=SUPPORT_RADIUS * self.grid.spacing)
+            # between anchors a curved surface bulges past their hull by up to about the gap
+            # between neighbours: the margin is that gap, at least SUPPORT_RADIUS voxels
+            h = self.grid.spacing
+            margin = data_crop_limit(anchors, h, floor=SUPPORT_RADIUS, spread=1.0) * h
+            vertices, faces = crop_to_data_hull(vertices, faces, anchors, margin=margin)
         rejected = ([] if self.fit_report is None
                     else rejected_summary(self.fit_report, self.scene))
         result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
@@ -928,12 +956,15 @@ class Reconstructor:
 BYTES_PER_VOXEL = 29
 
 
-def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int = 300, **options) -> Result:
+def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int | None = None,
+                **options) -> Result:
     """Reconstruct a surface in one call.
 
     Args:
         scene: A :class:`Scene` or the path of a scene file.
-        iterations: Number of iterations of the flow.
+        iterations: Number of iterations of the flow; ``None`` (the default) chooses it from
+            the resolution (:func:`warpspec.options.default_iterations`: 300 up to 64 cells,
+            fewer on finer grids, whose start is already solved coarse to fine).
         **options: Keyword options of :class:`Reconstructor`.
 
     Returns:
@@ -947,5 +978,5 @@ def reconstruct(scene: Scene | str | os.PathLike, *, iterations: int = 300, **op
     if not isinstance(scene, Scene):
         scene = Scene.load(scene)
     solver = Reconstructor(scene, **options)
-    solver.run(iterations)
+    solver.run(solver.default_iterations if iterations is None else iterations)
     return solver.result()
