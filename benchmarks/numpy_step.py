@@ -131,13 +131,14 @@ def flow_step(
 
 def flow_inputs(solver) -> tuple:
     """``(owner, normals, gauss)`` device arrays of a Reconstructor, for the dense kernel."""
-    names = ("_owner", "_normals", "_gauss")
-    missing = [n for n in names if not hasattr(solver, n)]
+    names = ("owner", "normals", "gauss")
+    missing = [n for n in names if not hasattr(solver.workspace, n)]
     if missing:
         raise AttributeError(
-            f"Reconstructor no longer holds {', '.join(missing)}: update benchmarks/numpy_step.py"
+            f"Reconstructor.workspace no longer holds {', '.join(missing)}: update "
+            "benchmarks/numpy_step.py"
         )
-    return tuple(getattr(solver, n) for n in names)
+    return tuple(getattr(solver.workspace, n) for n in names)
 
 
 def dense_step(solver, out) -> None:
@@ -145,7 +146,7 @@ def dense_step(solver, out) -> None:
     from warpspec.kernels.differences import launch_flow_step
 
     owner, normals, gauss = flow_inputs(solver)
-    launch_flow_step(solver.phi, owner, normals, gauss, out, spacing=solver.grid.spacing,
+    launch_flow_step(solver.workspace.phi, owner, normals, gauss, out, spacing=solver.grid.spacing,
                      dt=solver.dt, normal_weight=1.0, alpha=solver.alpha,
                      point_weight=solver.w_point)
 
@@ -192,7 +193,7 @@ def verify(resolution: int = 24, *, device: str = "cpu", seed: int = 0) -> list[
     solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=resolution,
                               device=device)
     owner, normals, gauss = (a.numpy() for a in flow_inputs(solver))
-    phi = solver.phi.numpy()
+    phi = solver.phi
     h, dt = solver.grid.spacing, solver.dt
     common = {"spacing": h, "dt": dt, "alpha": solver.alpha, "point_weight": solver.w_point,
               "device": device}

@@ -28,13 +28,11 @@ __all__ = [
     "central_gradient",
     "curvature_term",
     "flow_step",
-    "init_flow_step",
     "launch_central_gradient",
     "launch_curvature_term",
     "launch_build_band",
     "launch_flow_step",
     "launch_flow_step_band",
-    "launch_init_flow_step",
     "launch_upwind_gradient_norm",
     "upwind_gradient_norm",
 ]
@@ -358,35 +356,6 @@ def build_band(
 
 
 @wp.kernel
-def init_flow_step(
-    phi: wp.array3d[float],
-    dist: wp.array3d[float],
-    h: float,
-    dt: float,
-    out: wp.array3d[float],
-):
-    """One step of the Zhao-Osher-Fedkiw flow ``phi_t = (grad d . n + d kappa) |grad phi|``.
-
-    The advective part ``grad d . grad phi`` uses upwind one-sided differences (velocity
-    ``-grad d``); the curvature part central differences.
-    """
-    i, j, k = wp.tid()
-    inv_h = 1.0 / h
-    inv_2h = 0.5 * inv_h
-    c = phi[i, j, k]
-    gd = central_gradient(dist, i, j, k, inv_2h)
-    # phi_t = grad d . grad phi: a front carried with velocity u = -grad d, upwind on u.
-    adv = float(0.0)
-    for axis in range(3):
-        d = one_sided(phi, i, j, k, axis, inv_h)
-        if gd[axis] < 0.0:
-            adv += gd[axis] * d[0]
-        else:
-            adv += gd[axis] * d[1]
-    out[i, j, k] = c + dt * (adv + dist[i, j, k] * curvature_term(phi, i, j, k, h))
-
-
-@wp.kernel
 def central_gradient_field(phi: wp.array3d[float], h: float, out: wp.array3d[wp.vec3]):
     """Central-difference gradient at every node."""
     i, j, k = wp.tid()
@@ -500,19 +469,6 @@ def launch_build_band(phi: wp.array, band: wp.array, count: wp.array, *, width: 
     flat = phi.flatten()
     wp.launch(build_band, dim=flat.shape[0], inputs=[flat, wp.vec3i(*phi.shape), float(width)],
               outputs=[band, count], device=phi.device)
-
-
-def launch_init_flow_step(
-    phi: wp.array, dist: wp.array, out: wp.array, *, spacing: float, dt: float
-) -> None:
-    """Advance ``phi`` by one step of the initialisation flow (paper eq. 22) into ``out``."""
-    wp.launch(
-        init_flow_step,
-        dim=phi.shape,
-        inputs=[phi, dist, float(spacing), float(dt)],
-        outputs=[out],
-        device=phi.device,
-    )
 
 
 def launch_central_gradient(phi: wp.array, out: wp.array, *, spacing: float) -> None:
