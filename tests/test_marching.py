@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 
 from tests.helpers import cube_grid, sphere_sdf
 from warpspec.errors import ReconstructionError, SceneError
-from warpspec.kernels.differences import launch_build_band
+from warpspec.kernels.band import launch_build_band
 from warpspec.mesh import triangulate, triangulate_device
 
 

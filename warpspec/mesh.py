@@ -106,7 +106,7 @@ def triangulate_device(
     Args:
         phi: Level set, float32 ``wp.array3d`` of ``grid.shape`` on any device.
         grid: Its grid (origin, spacing).
-        band: Optional narrow band, as :func:`~warpspec.kernels.differences.build_band`
+        band: Optional narrow band, as :func:`~warpspec.kernels.band.build_band`
             encodes it (on the same device); ``count`` must come with it.
         count: One int on the device: how many entries of ``band`` are valid.
 

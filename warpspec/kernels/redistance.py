@@ -26,7 +26,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..errors import SceneError
-from .differences import band_slot
+from .band import band_slot
 
 wp.set_module_options({"enable_backward": False})
 
@@ -871,7 +871,7 @@ class Redistancer:
 
         Args:
             phi: Level set of shape ``shape``, float32, on this device.
-            band: The band's nodes, as :func:`~warpspec.kernels.differences.build_band`
+            band: The band's nodes, as :func:`~warpspec.kernels.band.build_band`
                 encodes them.
             count: One int: how many entries of ``band`` are valid.
             size: Threads to launch: the band's size if known on the host, else the capacity

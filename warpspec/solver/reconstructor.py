@@ -18,8 +18,8 @@ from .._runtime import init, resolve_device
 from ..errors import InputError, ReconstructionError
 from ..grid import Grid
 from ..implicit import rejected_summary
-from ..kernels.differences import launch_flow_step, launch_flow_step_band
-from ..kernels.rays import MEASURE_SLOTS
+from ..kernels.flow import launch_flow_step, launch_flow_step_band
+from ..kernels.measures import MEASURE_SLOTS
 from ..mesh import supported_components, triangulate
 from ..options import DEFAULTS, OPTIONS
 from ..scene import Scene

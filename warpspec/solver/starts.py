@@ -20,7 +20,7 @@ from ..errors import InputError, SceneError
 from ..grid import Grid
 from ..implicit import FitReport, ImplicitStart
 from ..initial import fit_height_field, plane_frame
-from ..kernels.constraints import launch_bend, launch_blend, launch_height_field, launch_plane
+from ..kernels.start_fields import launch_bend, launch_blend, launch_height_field, launch_plane
 from ..scene import Scene
 from .workspace import Workspace
 

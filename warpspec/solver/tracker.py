@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..kernels.differences import launch_build_band
-from ..kernels.rays import MEASURE_SLOTS, launch_measures
+from ..kernels.band import launch_build_band
+from ..kernels.measures import MEASURE_SLOTS, launch_measures
 from .workspace import Workspace
 
 __all__ = ["FULL_REINIT_EVERY", "BandTracker"]

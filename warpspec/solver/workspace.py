@@ -14,7 +14,8 @@ import warp as wp
 from ..errors import InputError
 from ..grid import Grid
 from ..kernels.constraints import launch_claim_normals, launch_gaussian
-from ..kernels.rays import NUM_SLOTS, launch_intersect
+from ..kernels.measures import NUM_SLOTS
+from ..kernels.rays import launch_intersect
 from ..kernels.redistance import Redistancer
 from ..scene import Scene
 from .state import free_host_memory
