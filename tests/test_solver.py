@@ -326,3 +326,14 @@ def test_a_level_set_of_another_shape_is_refused(octant):
     bad[0, 0, 0] = np.nan
     with pytest.raises(ws.InputError, match="^phi0: holds non-finite values"):
         ws.Reconstructor(octant, grid=grid, device="cpu", phi0=bad)
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"device": "tpu"}, "^device: unknown device"),
+    ({"start": "sphere"}, "^start: must be one of implicit, height, paper"),
+    ({"alpha": -1.0}, "^alpha: must be at least 0.0"),
+])
+def test_bad_arguments_are_input_errors_not_scene_errors(octant, kwargs, message):
+    with pytest.raises(ws.InputError, match=message) as info:
+        ws.Reconstructor(octant, resolution=16, **kwargs)
+    assert not isinstance(info.value, ws.SceneError)

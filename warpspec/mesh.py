@@ -116,19 +116,19 @@ def triangulate_device(
     Raises:
         ReconstructionError: If there is no zero crossing, or the band misses a node of a
             cell that the surface crosses.
-        SceneError: If ``phi`` does not match ``grid`` or ``band`` comes without ``count``.
+        InputError: If ``phi`` does not match ``grid`` or ``band`` comes without ``count``.
     """
     import warp as wp
 
-    from .errors import SceneError
+    from .errors import InputError
     from .kernels import marching
 
     if not isinstance(phi, wp.array) or phi.ndim != 3 or phi.dtype != wp.float32:
-        raise SceneError("phi: must be a float32 wp.array3d; for NumPy use triangulate()")
+        raise InputError("phi: must be a float32 wp.array3d; for NumPy use triangulate()")
     if tuple(phi.shape) != tuple(grid.shape):
-        raise SceneError(f"phi: shape {tuple(phi.shape)} does not match the grid {grid.shape}")
+        raise InputError(f"phi: shape {tuple(phi.shape)} does not match the grid {grid.shape}")
     if (band is None) != (count is None):
-        raise SceneError("band: band and count must be given together")
+        raise InputError("band: band and count must be given together")
     device = phi.device
     use_band = 0 if band is None else 1
     if band is None:
