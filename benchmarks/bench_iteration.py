@@ -78,7 +78,7 @@ def measure(size: int, *, device, repeats: int, iterations: int | None, breakdow
     grid = solver.grid
     voxels = grid.size
     owner, normals, gauss = (a.numpy() for a in flow_inputs(solver))
-    phi = solver.phi.numpy()
+    phi = solver.phi
     out = wp.empty(grid.shape, dtype=float, device=device)
     # A block covers a whole cycle of reinitialisations: band-only ones and the full one that
     # comes every FULL_REINIT_EVERY-th time, so the amortised cost counts both.
@@ -139,7 +139,7 @@ def _breakdown(solver, sync, repeats: int) -> dict:
         solver.reinit_every = 0
         for _ in range(repeats):
             parts["step_no_intersect"].append(
-                _timed(lambda: solver.step(intersect=False), sync))
+                _timed(lambda: solver._step(intersect=False), sync))
             parts["step_no_reinit"].append(_timed(solver.step, sync))
             parts["reinitialize"].append(_timed(solver.reinitialize, sync))
             parts["measures"].append(_timed(solver.measures, sync))

@@ -2,7 +2,7 @@
 
     phi_t = w_N |grad phi| div(n - V) + alpha kappa |grad phi|,  then  phi *= exp(-w_P G dt)
 
-with the same stencils as ``warpspec.kernels.differences.flow_step``: central differences,
+with the same stencils as ``warpspec.kernels.flow.flow_step``: central differences,
 the usual central-difference mean curvature capped at ``1/h``, ``n - V`` nonzero only at nodes
 that a constraint owns (``0 <= owner < len(normals)``), and a zero normal derivative at the
 border (indices clamped, here by edge padding). Everything is vectorised (views into one padded
@@ -131,21 +131,22 @@ def flow_step(
 
 def flow_inputs(solver) -> tuple:
     """``(owner, normals, gauss)`` device arrays of a Reconstructor, for the dense kernel."""
-    names = ("_owner", "_normals", "_gauss")
-    missing = [n for n in names if not hasattr(solver, n)]
+    names = ("owner", "normals", "gauss")
+    missing = [n for n in names if not hasattr(solver.workspace, n)]
     if missing:
         raise AttributeError(
-            f"Reconstructor no longer holds {', '.join(missing)}: update benchmarks/numpy_step.py"
+            f"Reconstructor.workspace no longer holds {', '.join(missing)}: update "
+            "benchmarks/numpy_step.py"
         )
-    return tuple(getattr(solver, n) for n in names)
+    return tuple(getattr(solver.workspace, n) for n in names)
 
 
 def dense_step(solver, out) -> None:
     """Launch warpspec's dense flow-step kernel on a solver's state into ``out``."""
-    from warpspec.kernels.differences import launch_flow_step
+    from warpspec.kernels.flow import launch_flow_step
 
     owner, normals, gauss = flow_inputs(solver)
-    launch_flow_step(solver.phi, owner, normals, gauss, out, spacing=solver.grid.spacing,
+    launch_flow_step(solver.workspace.phi, owner, normals, gauss, out, spacing=solver.grid.spacing,
                      dt=solver.dt, normal_weight=1.0, alpha=solver.alpha,
                      point_weight=solver.w_point)
 
@@ -153,7 +154,7 @@ def dense_step(solver, out) -> None:
 def _compare(phi, owner, normals, gauss, *, spacing, dt, alpha, point_weight, device) -> dict:
     import warp as wp
 
-    from warpspec.kernels.differences import launch_flow_step
+    from warpspec.kernels.flow import launch_flow_step
 
     expect = flow_step(phi, owner, normals, gauss, spacing=spacing, dt=dt, alpha=alpha,
                        point_weight=point_weight)
@@ -187,12 +188,12 @@ def verify(resolution: int = 24, *, device: str = "cpu", seed: int = 0) -> list[
         ``rel_change`` (largest difference over the largest change of ``phi``), and more.
     """
     import warpspec as ws
-    from warpspec.kernels.differences import NEIGHBOUR_OWNED, NO_OWNER
+    from warpspec.kernels.flow import NEIGHBOUR_OWNED, NO_OWNER
 
     solver = ws.Reconstructor(ws.Scene.load(OCTANT), resolution=resolution,
                               device=device)
     owner, normals, gauss = (a.numpy() for a in flow_inputs(solver))
-    phi = solver.phi.numpy()
+    phi = solver.phi
     h, dt = solver.grid.spacing, solver.dt
     common = {"spacing": h, "dt": dt, "alpha": solver.alpha, "point_weight": solver.w_point,
               "device": device}

@@ -68,7 +68,7 @@ def test_bench_memory_prints_its_table(device, capsys):
                                       "--device", device.alias])
     out = capsys.readouterr().out
     assert len(table_rows(out, "16^3")) == 1
-    assert table_rows(out, "`solver.phi`")
+    assert table_rows(out, "`solver.workspace.phi`")
     # at least phi and its ping-pong twin, 4 bytes a voxel each
     assert rows[0]["held_bytes"] >= 8 * rows[0]["voxels"]
     assert rows[0]["tracker_peak_bytes"] >= rows[0]["held_bytes"] * 0.9

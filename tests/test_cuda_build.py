@@ -6,9 +6,12 @@ import pytest
 import warp as wp
 
 MODULES = [
-    "warpspec.kernels.differences",
+    "warpspec.kernels.flow",
+    "warpspec.kernels.band",
     "warpspec.kernels.constraints",
+    "warpspec.kernels.start_fields",
     "warpspec.kernels.rays",
+    "warpspec.kernels.measures",
     "warpspec.kernels.redistance",
 ]
 

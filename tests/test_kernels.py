@@ -6,24 +6,21 @@ import warp as wp
 
 from warpspec.grid import Grid
 from warpspec.initial import HeightFit, monomials, plane_frame
-from warpspec.kernels.constraints import (
+from warpspec.kernels.band import launch_build_band
+from warpspec.kernels.constraints import launch_claim_normals, launch_gaussian
+from warpspec.kernels.flow import (
     NEIGHBOUR_OWNED,
     NO_OWNER,
-    launch_bend,
-    launch_claim_normals,
-    launch_gaussian,
-    launch_height_field,
-    launch_plane,
-)
-from warpspec.kernels.differences import (
-    launch_build_band,
-    launch_central_gradient,
-    launch_curvature_term,
     launch_flow_step,
     launch_flow_step_band,
-    launch_upwind_gradient_norm,
 )
 from warpspec.kernels.rays import launch_intersect
+from warpspec.kernels.start_fields import launch_bend, launch_height_field, launch_plane
+from warpspec.kernels.stencils import (
+    launch_central_gradient,
+    launch_curvature_term,
+    launch_upwind_gradient_norm,
+)
 
 from .helpers import cube_grid, interior, sphere_sdf
 

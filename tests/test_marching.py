@@ -8,8 +8,8 @@ import warp as wp
 from scipy.spatial import cKDTree
 
 from tests.helpers import cube_grid, sphere_sdf
-from warpspec.errors import ReconstructionError, SceneError
-from warpspec.kernels.differences import launch_build_band
+from warpspec.errors import InputError, ReconstructionError
+from warpspec.kernels.band import launch_build_band
 from warpspec.mesh import triangulate, triangulate_device
 
 
@@ -91,12 +91,12 @@ def test_errors(device):
     grid, phi, _ = _sphere(12)
     with pytest.raises(ReconstructionError, match="no surface"):
         triangulate_device(wp.array(np.abs(phi) + 1, dtype=float, device=device), grid)
-    with pytest.raises(SceneError, match=r"^phi: "):
+    with pytest.raises(InputError, match=r"^phi: "):
         triangulate_device(wp.zeros((4, 4, 4), dtype=float, device=device), grid)
     field = wp.array(phi, dtype=float, device=device)
     band = wp.zeros(grid.size, dtype=int, device=device)
     count = wp.zeros(1, dtype=int, device=device)
-    with pytest.raises(SceneError, match=r"^band: "):
+    with pytest.raises(InputError, match=r"^band: "):
         triangulate_device(field, grid, band=band)
     # a band that stops short of the surface's cells
     launch_build_band(field, band, count, width=0.3 * grid.spacing)

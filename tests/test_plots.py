@@ -89,13 +89,13 @@ def test_plot_history_writes_four_panels(tmp_path):
 
 
 def test_bad_arguments_are_scene_errors(cap, tmp_path):
-    with pytest.raises(ws.SceneError, match="^history:"):
+    with pytest.raises(ws.InputError, match="^history:"):
         plot_history([], tmp_path / "x.png")
-    with pytest.raises(ws.SceneError, match="^views:"):
+    with pytest.raises(ws.InputError, match="^views:"):
         render_mesh(cap, tmp_path / "x.png", views=0)
-    with pytest.raises(ws.SceneError, match="^mesh: has no faces"):
+    with pytest.raises(ws.InputError, match="^mesh: has no faces"):
         render_mesh(trimesh.Trimesh(), tmp_path / "x.png")
-    with pytest.raises(ws.SceneError, match=r"^hits: expected an array of shape \(n, 3\)"):
+    with pytest.raises(ws.InputError, match=r"^hits: expected an array of shape \(n, 3\)"):
         render_mesh(cap, tmp_path / "x.png", hits=np.zeros((4, 2)))
     assert not (tmp_path / "x.png").exists()
 
@@ -105,10 +105,10 @@ def test_missing_matplotlib_gives_a_clear_message(cap, tmp_path, monkeypatch):
         if name == "matplotlib" or name.startswith("matplotlib."):
             monkeypatch.delitem(sys.modules, name)
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
-    with pytest.raises(ws.SceneError, match=r"^--render: needs matplotlib; install it with: "
+    with pytest.raises(ws.InputError, match=r"^--render: needs matplotlib; install it with: "
                                             r"pip install 'warpspec\[plot\]'$"):
         require_matplotlib("--render")
-    with pytest.raises(ws.SceneError, match="^render_mesh: needs matplotlib"):
+    with pytest.raises(ws.InputError, match="^render_mesh: needs matplotlib"):
         render_mesh(cap, tmp_path / "x.png")
-    with pytest.raises(ws.SceneError, match="^plot_history: needs matplotlib"):
+    with pytest.raises(ws.InputError, match="^plot_history: needs matplotlib"):
         plot_history(history(), tmp_path / "x.png")

@@ -9,7 +9,7 @@ import warp as wp
 from scipy.spatial import cKDTree
 
 from warpspec._runtime import init
-from warpspec.errors import SceneError
+from warpspec.errors import InputError
 from warpspec.grid import Grid
 from warpspec.kernels.redistance import Redistancer
 from warpspec.redistance import point_distance, redistance
@@ -238,9 +238,9 @@ def test_point_distance_scales_to_1e5_points(device):
 
 
 def test_no_zero_crossing_raises(device):
-    with pytest.raises(SceneError, match=r"^phi: has no zero crossing"):
+    with pytest.raises(InputError, match=r"^phi: has no zero crossing"):
         redistance(np.ones((4, 4, 4)), 0.1, device=device)
-    with pytest.raises(SceneError, match=r"^phi: has no zero crossing"):
+    with pytest.raises(InputError, match=r"^phi: has no zero crossing"):
         redistance(-np.ones((4, 4, 4), dtype=np.float32), 0.1, device=device)
     # a node exactly on the surface is a zero crossing
     phi = np.ones((4, 4, 4))
@@ -280,24 +280,24 @@ _GRID = Grid(origin=np.zeros(3), spacing=0.1, shape=(4, 4, 4))
     ],
 )
 def test_bad_arguments_raise_scene_error_naming_them(call, name):
-    with pytest.raises(SceneError, match=rf"^{name}: ") as info:
+    with pytest.raises(InputError, match=rf"^{name}: ") as info:
         call()
     assert "\n" not in str(info.value)
 
 
 def test_redistancer_checks_its_arguments(device):
-    with pytest.raises(SceneError, match=r"^method: "):
+    with pytest.raises(InputError, match=r"^method: "):
         Redistancer((4, 4, 4), 0.1, device, method="fast")
-    with pytest.raises(SceneError, match=r"^band: "):
+    with pytest.raises(InputError, match=r"^band: "):
         Redistancer((4, 4, 4), 0.1, device, band="exact")
-    with pytest.raises(SceneError, match=r"^passes: "):
+    with pytest.raises(InputError, match=r"^passes: "):
         Redistancer((4, 4, 4), 0.1, device, passes=0)
     rd = Redistancer((4, 4, 4), 0.1, device)
-    with pytest.raises(SceneError, match=r"^phi: expected shape"):
+    with pytest.raises(InputError, match=r"^phi: expected shape"):
         rd.reinitialize(wp.zeros((4, 4, 5), dtype=float, device=device))
-    with pytest.raises(SceneError, match=r"^phi: expected float32"):
+    with pytest.raises(InputError, match=r"^phi: expected float32"):
         rd.reinitialize(wp.zeros((4, 4, 4), dtype=wp.float64, device=device))
-    with pytest.raises(SceneError, match=r"^points: "):
+    with pytest.raises(InputError, match=r"^points: "):
         rd.point_distance(
             wp.zeros(3, dtype=float, device=device),
             (0.0, 0.0, 0.0),
@@ -325,7 +325,7 @@ def test_cap_gives_the_full_distance_clamped(sphere64, device):
     rd.reinitialize(field, cap=4.0)
     np.testing.assert_allclose(field.numpy(), np.sign(full) * np.minimum(np.abs(full), 4 * h),
                                rtol=0, atol=1e-6 * h)
-    with pytest.raises(SceneError, match=r"^cap: "):
+    with pytest.raises(InputError, match=r"^cap: "):
         rd.reinitialize(field, cap=0.0)
-    with pytest.raises(SceneError, match=r"^cap: "):
+    with pytest.raises(InputError, match=r"^cap: "):
         redistance(phi, h, device=device, cap=-h)

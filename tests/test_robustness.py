@@ -116,7 +116,7 @@ def test_a_non_finite_level_set_stops_the_run_naming_the_iteration(capsys, folde
     def step(self, **kwargs):
         original(self, **kwargs)
         if self.iteration == 3:
-            self.phi.fill_(float("nan"))
+            self.workspace.phi.fill_(float("nan"))
 
     monkeypatch.setattr(ws.Reconstructor, "step", step)
     status = main(reconstruct_all(folder))

@@ -32,7 +32,7 @@ def test_point_term_alone_never_increases_point_energy(octant, device):
                               reinit_every=0, point_weight=1.0, device=device)
     energies = [solver.measures()["energy_point"]]
     for _ in range(30):
-        solver.step(normal=False, smooth=False, points=True)
+        solver._step(normal=False, smooth=False, points=True)
         energies.append(solver.measures()["energy_point"])
     e = np.array(energies)
     assert e[0] > 0
@@ -47,7 +47,7 @@ def test_normal_term_alone_never_increases_normal_energy(octant, device):
                               reinit_every=0, device=device)
     energies = [solver.measures()["energy_normal"]]
     for _ in range(40):
-        solver.step(normal=True, smooth=False, points=False, intersect=False)
+        solver._step(normal=True, smooth=False, points=False, intersect=False)
         energies.append(solver.measures(intersect=False)["energy_normal"])
     e = np.array(energies)
     assert np.all(np.diff(e) <= 1e-6 * e[0]), np.diff(e).max()
@@ -136,9 +136,9 @@ def test_triangulation_is_trimesh_processing_and_the_ply_reads_back(tmp_path, si
 def test_reinitialisation_keeps_points_on_the_surface(octant):
     solver = ws.Reconstructor(octant, resolution=32, device="cpu")
     h = solver.grid.spacing
-    before = sample_trilinear(solver.phi.numpy(), solver.grid, octant.points)
+    before = sample_trilinear(solver.phi, solver.grid, octant.points)
     solver.reinitialize()
-    after = sample_trilinear(solver.phi.numpy(), solver.grid, octant.points)
+    after = sample_trilinear(solver.phi, solver.grid, octant.points)
     assert np.all(np.abs(after - before) < 0.05 * h)
 
 
@@ -187,7 +187,7 @@ def test_a_grid_too_large_for_memory_is_refused_before_allocating(octant, monkey
 
 def test_a_run_that_loses_its_surface_says_so(octant):
     solver = ws.Reconstructor(octant, resolution=16, device="cpu")
-    solver.phi.fill_(1.0)
+    solver.workspace.phi.fill_(1.0)
     with pytest.raises(ws.ReconstructionError, match="no surface"):
         solver.result()
 
@@ -199,7 +199,7 @@ def test_narrow_band_gives_the_dense_result(octant, device):
                                   narrow_band=band,
                                   device=device)
         solver.run(40, measure_every=0)
-        phis.append(solver.phi.numpy())
+        phis.append(solver.phi)
         h = solver.grid.spacing
     dense, banded = phis
     near = np.abs(dense) < 2 * h
@@ -214,7 +214,7 @@ def test_without_reinitialisation_every_node_is_updated(octant):
                                   narrow_band=band,
                                   reinit_every=0, device="cpu")
         solver.run(30)
-        phis.append(solver.phi.numpy())
+        phis.append(solver.phi)
     np.testing.assert_array_equal(phis[0], phis[1])
 
 
@@ -224,23 +224,23 @@ def test_graph_replay_gives_the_launch_by_launch_result(octant, device):
         solver = ws.Reconstructor(octant, resolution=24, start="paper", bulge=0.5, graph=graph,
                                   device=device)
         solver.run(25, measure_every=5)
-        phis.append(solver.phi.numpy())
+        phis.append(solver.phi)
     np.testing.assert_array_equal(phis[0], phis[1])
 
 
 def test_a_non_finite_phi_stops_the_run_and_keeps_the_last_good_state(octant):
     solver = ws.Reconstructor(octant, resolution=20, device="cpu")
     solver.run(10, measure_every=5)
-    good = solver.phi.numpy()
+    good = solver.phi
     solver.run(3, measure_every=0)
-    bad = solver.phi.numpy()
+    bad = solver.phi
     i, j, k = np.argwhere(np.abs(bad) < solver.grid.spacing)[0]
     bad[i, j, k] = np.nan
-    solver.phi.assign(bad)
+    solver.workspace.phi.assign(bad)
     with pytest.raises(ws.ReconstructionError, match=r"^iteration 1[3-9]: phi has .* iteration 10"):
         solver.run(5, measure_every=1)
     assert solver.iteration == 10
-    np.testing.assert_array_equal(solver.phi.numpy(), good)
+    np.testing.assert_array_equal(solver.phi, good)
     assert solver.history[-1]["iteration"] == 10
     solver.run(2)  # and it can go on from there
 
@@ -251,7 +251,7 @@ def test_returned_arrays_do_not_change_when_the_solver_goes_on(octant):
     solver = ws.Reconstructor(octant, resolution=20, start="height", bulge=0.5, device="cpu")
     bent, start = solver.bent_phi.copy(), solver.initial_phi.copy()
     result = solver.result()
-    phi, snapshot = result.phi.copy(), solver.phi_numpy()
+    phi, snapshot = result.phi.copy(), solver.phi
     solver.run(15, measure_every=0)
     np.testing.assert_array_equal(solver.bent_phi, bent)
     np.testing.assert_array_equal(solver.initial_phi, start)
@@ -268,9 +268,72 @@ def test_cpu_and_cuda_agree_near_the_surface(octant):
     for device in ("cpu", "cuda:0"):
         solver = ws.Reconstructor(octant, resolution=32, start="paper", bulge=0.5, device=device)
         solver.run(50, measure_every=10)
-        runs[device] = (solver.phi.numpy(), solver.history[-1], solver.grid.spacing)
+        runs[device] = (solver.phi, solver.history[-1], solver.grid.spacing)
     (cpu, cpu_m, h), (gpu, gpu_m, _) = runs["cpu"], runs["cuda:0"]
     near = np.abs(cpu) < 2 * h
     assert np.max(np.abs(cpu - gpu)[near]) <= 1e-3 * h
     assert gpu_m["active"] == cpu_m["active"]
     assert gpu_m["point_error"] == pytest.approx(cpu_m["point_error"], abs=1e-3)
+
+
+def test_phi_is_a_copy_that_the_solver_does_not_see(octant):
+    solver = ws.Reconstructor(octant, resolution=16, start="paper", device="cpu")
+    phi = solver.phi
+    phi[...] = 7.0
+    assert np.all(np.abs(solver.phi) < 7.0)
+    before = solver.phi
+    solver.run(10)
+    assert not np.array_equal(solver.phi, before)  # the run moved it, not the copy taken
+    assert np.all(np.abs(phi - 7.0) == 0.0)
+
+
+def test_a_level_set_handed_in_continues_as_a_saved_one_does(octant, tmp_path):
+    first = ws.Reconstructor(octant, resolution=20, start="paper", bulge=0.5, device="cpu")
+    first.run(10)
+    first.result().save_phi(tmp_path / "phi.npz")
+    loaded = ws.Result.load(tmp_path / "phi.npz")
+    np.testing.assert_array_equal(loaded.phi, first.phi)
+    assert loaded.grid.shape == first.grid.shape and loaded.grid.spacing == first.grid.spacing
+    np.testing.assert_array_equal(loaded.grid.origin, first.grid.origin)
+    assert len(loaded.faces) > 0 and loaded.history == []
+    runs = []
+    for kwargs in ({"resume": tmp_path / "phi.npz"}, {"phi0": loaded},
+                   {"phi0": loaded.phi, "grid": loaded.grid}):
+        solver = ws.Reconstructor(octant, device="cpu", **kwargs)
+        np.testing.assert_array_equal(solver.initial_phi, first.phi)
+        solver.run(5)
+        runs.append(solver.phi)
+    np.testing.assert_array_equal(runs[0], runs[1])
+    np.testing.assert_array_equal(runs[0], runs[2])
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"resolution": 32}, "^resolution: resume brings its own grid"),
+    ({"phi0": np.zeros((4, 4, 4))}, "^resume: pass either resume or phi0"),
+])
+def test_a_saved_level_set_refuses_a_second_grid(octant, tmp_path, kwargs, message):
+    solver = ws.Reconstructor(octant, resolution=16, start="paper", device="cpu")
+    solver.result().save_phi(tmp_path / "phi.npz")
+    with pytest.raises(ws.InputError, match=message):
+        ws.Reconstructor(octant, device="cpu", resume=tmp_path / "phi.npz", **kwargs)
+
+
+def test_a_level_set_of_another_shape_is_refused(octant):
+    with pytest.raises(ws.InputError, match=r"^phi0: has shape \(4, 4, 4\)"):
+        ws.Reconstructor(octant, resolution=16, device="cpu", phi0=np.zeros((4, 4, 4)))
+    grid = ws.Grid(origin=np.zeros(3), spacing=0.1, shape=(16, 16, 16))
+    bad = np.zeros(grid.shape)
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ws.InputError, match="^phi0: holds non-finite values"):
+        ws.Reconstructor(octant, grid=grid, device="cpu", phi0=bad)
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"device": "tpu"}, "^device: unknown device"),
+    ({"start": "sphere"}, "^start: must be one of implicit, height, paper"),
+    ({"alpha": -1.0}, "^alpha: must be at least 0.0"),
+])
+def test_bad_arguments_are_input_errors_not_scene_errors(octant, kwargs, message):
+    with pytest.raises(ws.InputError, match=message) as info:
+        ws.Reconstructor(octant, resolution=16, **kwargs)
+    assert not isinstance(info.value, ws.SceneError)

@@ -10,8 +10,10 @@ from pathlib import Path
 
 from ._atomic import atomic_write
 from .errors import InputError
+from .options import OPTIONS
 
 __all__ = [
+    "add_option",
     "atomic_write",
     "finite",
     "input_file",
@@ -98,3 +100,35 @@ def positive(text: str) -> float:
 
 def integer(text: str) -> int:
     return _int_at_least(text, None, "an integer")
+
+
+def add_option(parser: argparse.ArgumentParser, name: str, *, help: str | None = None,
+               shown: str | None = None, **overrides) -> None:
+    """Add the flag of the option ``name`` of :data:`warpspec.options.OPTIONS`.
+
+    Its type, check, choices, default and help come from the option; ``help`` replaces the
+    help (the option's default is still appended) and ``overrides`` go to ``add_argument``
+    (``default=None``, say, to tell an omitted flag from its default); ``shown`` replaces
+    the default written in the help.
+    """
+    option = OPTIONS[name]
+
+    def parse(text: str):
+        try:
+            return option.parse(text)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).partition(": ")[2]) from None
+
+    parse.__name__ = name
+    if shown is None:
+        shown = ("none" if option.default is None else option.default
+                 if option.kind == "choice" else f"{option.default:g}")
+    kwargs = {"default": option.default}
+    if option.kind == "choice":
+        kwargs["choices"] = option.choices
+    else:
+        kwargs["type"] = parse
+    kwargs.update(overrides)
+    text = option.help if help is None else help
+    parser.add_argument(option.flag, help=f"{text} (default {shown})".replace("%", "%%"),
+                        **kwargs)

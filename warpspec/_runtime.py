@@ -56,9 +56,9 @@ def resolve_device(device: str | wp.Device | None) -> wp.Device:
             CUDA when Warp sees a GPU, else the CPU.
 
     Raises:
-        SceneError: If the named device does not exist here.
+        InputError: If the named device does not exist here.
     """
-    from .errors import SceneError
+    from .errors import InputError
 
     init()
     if device is None:
@@ -67,11 +67,11 @@ def resolve_device(device: str | wp.Device | None) -> wp.Device:
         return device
     name = str(device)
     if name.startswith("cuda") and not wp.is_cuda_available():
-        raise SceneError(
+        raise InputError(
             f"device: {name!r} was asked for but Warp sees no CUDA GPU here; use 'cpu'"
         )
     try:
         return wp.get_device(name)
     except Exception:
         names = ", ".join(d.alias for d in wp.get_devices())
-        raise SceneError(f"device: unknown device {name!r}; available: {names}") from None
+        raise InputError(f"device: unknown device {name!r}; available: {names}") from None

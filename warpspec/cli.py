@@ -47,16 +47,15 @@ from ._atomic import (
     restore_signals,
 )
 from ._cli_common import (
+    add_option,
     finite,
     input_file,
     non_negative,
     non_negative_int,
     output_path,
     positive,
-    positive_int,
 )
 from .errors import InputError, ReconstructionError, SceneError
-from .options import STARTS
 
 __all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"]
 
@@ -311,7 +310,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         solver = Reconstructor(
             scene,
-            resolution=64 if args.resolution is None else args.resolution,
+            resolution=None if resume is not None else args.resolution,
             alpha=args.alpha,
             start=args.start,
             bulge=args.bulge,
@@ -609,35 +608,18 @@ def build_parser() -> argparse.ArgumentParser:
                                    "model with 'warpspec import-colmap'")
     rec.add_argument("-o", "--output", required=True,
                      help=f"mesh to write; format by extension ({', '.join(MESH_FORMATS)})")
-    rec.add_argument("--resolution", type=positive_int, default=None,
-                     help="cells along the longest side of the domain (default 64)")
-    rec.add_argument("--iterations", type=positive_int, default=None,
-                     help="iterations of the flow (default: 300 up to resolution 64, then "
-                          "300 * 64 / resolution, at least 50: the start is already solved "
-                          "coarse to fine)")
-    rec.add_argument("--alpha", type=non_negative, default=0.01,
-                     help="weight of the smoothness term (default 0.01)")
-    rec.add_argument("--start", choices=STARTS, default=STARTS[0],
-                     help="starting surface: implicit (default: any shape, fitted to the data "
-                          "coarse to fine), height (a height field over the plane through the "
-                          "points) or paper (that plane, bent by --bulge)")
-    rec.add_argument("--bulge", type=finite, default=0.0,
-                     help="with --start paper or height: bend the initial plane toward the "
-                          "cameras by this times the distance to the nearest point (default 0)")
-    rec.add_argument("--bulge-cap", type=positive, default=None,
-                     help="cap on that distance, in voxel widths (default: none)")
-    rec.add_argument("--reinit-every", type=non_negative_int, default=10,
-                     help="reinitialise to a signed distance every N iterations, 0 never "
-                          "(default 10)")
+    for name in ("resolution", "iterations", "alpha", "start", "bulge", "bulge_cap",
+                 "reinit_every"):
+        add_option(rec, name, **({"default": None} if name == "resolution" else {}))
     rec.add_argument("--device", default=None,
                      help="Warp device: cpu, cuda, cuda:0 (default: CUDA if present)")
     rec.add_argument("--metrics", default=None,
                      help="write the per-iteration measures (.csv or .json)")
-    rec.add_argument("--measure-every", type=non_negative_int, default=None, metavar="N",
-                     help="reduce the measures every N iterations, 0 only at the start and "
-                          "the end (default: 1 with --metrics or --plot, else 10 for the "
-                          "progress bar, 0 when there is none); each costs a reduction "
-                          "and a device synchronisation")
+    add_option(rec, "measure_every", default=None, metavar="N",
+               help="reduce the measures every N iterations, 0 only at the start and the end; "
+                    "each costs a reduction and a device synchronisation",
+               shown="1 with --metrics or --plot, else 10 for the progress bar, 0 when there "
+                     "is none")
     rec.add_argument("--save-phi", default=None, help="keep the level set and its grid (.npz)")
     rec.add_argument("--resume", default=None, help="continue from a level set saved with "
                                                     "--save-phi (its grid is used)")

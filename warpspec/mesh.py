@@ -106,7 +106,7 @@ def triangulate_device(
     Args:
         phi: Level set, float32 ``wp.array3d`` of ``grid.shape`` on any device.
         grid: Its grid (origin, spacing).
-        band: Optional narrow band, as :func:`~warpspec.kernels.differences.build_band`
+        band: Optional narrow band, as :func:`~warpspec.kernels.band.build_band`
             encodes it (on the same device); ``count`` must come with it.
         count: One int on the device: how many entries of ``band`` are valid.
 
@@ -116,19 +116,19 @@ def triangulate_device(
     Raises:
         ReconstructionError: If there is no zero crossing, or the band misses a node of a
             cell that the surface crosses.
-        SceneError: If ``phi`` does not match ``grid`` or ``band`` comes without ``count``.
+        InputError: If ``phi`` does not match ``grid`` or ``band`` comes without ``count``.
     """
     import warp as wp
 
-    from .errors import SceneError
+    from .errors import InputError
     from .kernels import marching
 
     if not isinstance(phi, wp.array) or phi.ndim != 3 or phi.dtype != wp.float32:
-        raise SceneError("phi: must be a float32 wp.array3d; for NumPy use triangulate()")
+        raise InputError("phi: must be a float32 wp.array3d; for NumPy use triangulate()")
     if tuple(phi.shape) != tuple(grid.shape):
-        raise SceneError(f"phi: shape {tuple(phi.shape)} does not match the grid {grid.shape}")
+        raise InputError(f"phi: shape {tuple(phi.shape)} does not match the grid {grid.shape}")
     if (band is None) != (count is None):
-        raise SceneError("band: band and count must be given together")
+        raise InputError("band: band and count must be given together")
     device = phi.device
     use_band = 0 if band is None else 1
     if band is None:
@@ -365,3 +365,20 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
     index = np.full(len(vertices), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
     return np.asarray(vertices)[used], index[kept]
+
+
+def data_crop_limit(anchors: np.ndarray, spacing: float, *, floor: float,
+                    spread: float = 1.0) -> float:
+    """How far, in voxels, the data reaches beyond its anchors on an open surface.
+
+    ``spread`` times the median distance from an anchor to its nearest neighbour (the gap
+    that a curved surface between two anchors bulges across), at least ``floor``.
+    """
+    from scipy.spatial import cKDTree
+
+    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    if len(anchors) < 2:
+        return floor
+    grid_units = (anchors - anchors.min(axis=0)) / spacing
+    dist, _ = cKDTree(grid_units).query(grid_units, k=2)
+    return max(floor, spread * float(np.median(dist[:, 1])))

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import InputError
 
 __all__ = ["plot_history", "render_mesh", "require_matplotlib"]
 
@@ -35,7 +35,7 @@ def require_matplotlib(what: str = "plots") -> None:
         what: The feature that needs it, for the message (``"--render"``).
 
     Raises:
-        SceneError: ``"<what>: needs matplotlib; install it with: pip install 'warpspec[plot]'"``.
+        InputError: ``"<what>: needs matplotlib; install it with: pip install 'warpspec[plot]'"``.
     """
     _figure_class(what)
 
@@ -44,7 +44,7 @@ def _figure_class(what: str):
     try:
         from matplotlib.figure import Figure
     except ImportError:
-        raise SceneError(f"{what}: needs matplotlib; {INSTALL_HINT}") from None
+        raise InputError(f"{what}: needs matplotlib; {INSTALL_HINT}") from None
     return Figure
 
 
@@ -55,13 +55,13 @@ def _rows(value: Any, field: str, n: int | None = None) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise SceneError(f"{field}: expected an array of shape (n, 3)") from None
+        raise InputError(f"{field}: expected an array of shape (n, 3)") from None
     if arr.size == 0:
         return np.zeros((0, 3))
     if arr.ndim != 2 or arr.shape[1] != 3:
-        raise SceneError(f"{field}: expected an array of shape (n, 3), got {arr.shape}")
+        raise InputError(f"{field}: expected an array of shape (n, 3), got {arr.shape}")
     if n is not None and len(arr) != n:
-        raise SceneError(f"{field}: expected {n} rows (one per hit), got {len(arr)}")
+        raise InputError(f"{field}: expected {n} rows (one per hit), got {len(arr)}")
     return arr
 
 
@@ -117,18 +117,18 @@ def render_mesh(
         dpi: Resolution of a raster picture.
 
     Raises:
-        SceneError: If matplotlib is missing, the mesh has no faces, or an array is malformed.
+        InputError: If matplotlib is missing, the mesh has no faces, or an array is malformed.
     """
     Figure = _figure_class("render_mesh")
     if isinstance(views, bool) or not isinstance(views, int) or not 1 <= views <= 6:
-        raise SceneError(f"views: expected an integer from 1 to 6, got {views!r}")
+        raise InputError(f"views: expected an integer from 1 to 6, got {views!r}")
     try:
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
         faces = np.asarray(mesh.faces, dtype=np.int64)
     except AttributeError:
-        raise SceneError(f"mesh: expected a trimesh.Trimesh, got {type(mesh).__name__}") from None
+        raise InputError(f"mesh: expected a trimesh.Trimesh, got {type(mesh).__name__}") from None
     if len(faces) == 0:
-        raise SceneError("mesh: has no faces, nothing to render")
+        raise InputError("mesh: has no faces, nothing to render")
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     triangles = vertices[faces]
@@ -261,13 +261,13 @@ def plot_history(
         dpi: Resolution of a raster picture.
 
     Raises:
-        SceneError: If matplotlib is missing or the history is empty or malformed.
+        InputError: If matplotlib is missing or the history is empty or malformed.
     """
     Figure = _figure_class("plot_history")
     if isinstance(history, Mapping) or not isinstance(history, Sequence) or not history:
-        raise SceneError("history: expected a non-empty list of per-iteration dicts")
+        raise InputError("history: expected a non-empty list of per-iteration dicts")
     if not all(isinstance(row, Mapping) for row in history):
-        raise SceneError("history: every entry must be a dict of measures")
+        raise InputError("history: every entry must be a dict of measures")
     it = _column(history, "iteration")
     if not np.all(np.isfinite(it)):
         it = np.arange(len(history), dtype=np.float64)

@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from ._runtime import resolve_device
-from .errors import SceneError
+from .errors import InputError
 from .grid import Grid
 from .kernels.redistance import BAND_MODES, METHODS, Redistancer
 
@@ -40,20 +40,20 @@ VOXEL_CLIP = 1e6
 
 def _check_positive(name: str, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise SceneError(f"{name}: must be a positive finite number, got {value!r}")
+        raise InputError(f"{name}: must be a positive finite number, got {value!r}")
     value = float(value)
     if not (np.isfinite(value) and value > 0.0):
-        raise SceneError(f"{name}: must be a positive finite number, got {value!r}")
+        raise InputError(f"{name}: must be a positive finite number, got {value!r}")
     return value
 
 
 def _check_options(method: str, band: str, passes: int) -> None:
     if method not in METHODS:
-        raise SceneError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+        raise InputError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
     if band not in BAND_MODES:
-        raise SceneError(f"band: must be one of {', '.join(BAND_MODES)}, got {band!r}")
+        raise InputError(f"band: must be one of {', '.join(BAND_MODES)}, got {band!r}")
     if isinstance(passes, bool) or not isinstance(passes, numbers.Integral) or passes < 1:
-        raise SceneError(f"passes: must be a positive integer, got {passes!r}")
+        raise InputError(f"passes: must be a positive integer, got {passes!r}")
 
 
 def redistance(
@@ -94,16 +94,16 @@ def redistance(
         A new array, same shape and float dtype as ``phi``.
 
     Raises:
-        SceneError: If an argument is invalid, or ``phi`` has no zero crossing (no node is
+        InputError: If an argument is invalid, or ``phi`` has no zero crossing (no node is
             negative while another is not, and none is exactly 0).
     """
     arr = np.asarray(phi)
     if arr.dtype not in (np.float32, np.float64):
-        raise SceneError(f"phi: must be a float32 or float64 array, got dtype {arr.dtype}")
+        raise InputError(f"phi: must be a float32 or float64 array, got dtype {arr.dtype}")
     if arr.ndim != 3 or min(arr.shape) < 2:
-        raise SceneError(f"phi: must be 3-D with at least 2 nodes per axis, got shape {arr.shape}")
+        raise InputError(f"phi: must be 3-D with at least 2 nodes per axis, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise SceneError(f"phi: must be finite, found {int(np.sum(~np.isfinite(arr)))} NaN/inf")
+        raise InputError(f"phi: must be finite, found {int(np.sum(~np.isfinite(arr)))} NaN/inf")
     h = _check_positive("spacing", spacing)
     _check_options(method, band, passes)
     if cap is not None:
@@ -118,7 +118,7 @@ def redistance(
     negative = phi32 < 0.0
     if not (negative.any() and not negative.all()) and not np.any(phi32 == 0.0):
         side = "negative (inside)" if negative.all() else "positive (outside)"
-        raise SceneError(
+        raise InputError(
             f"phi: has no zero crossing (every node is {side}); there is no surface to measure "
             "the distance from"
         )
@@ -128,7 +128,7 @@ def redistance(
     with np.errstate(over="ignore"):
         out = np.array(field.numpy().astype(np.float64) * h, dtype=arr.dtype)
     if not np.all(np.isfinite(out)):
-        raise SceneError(
+        raise InputError(
             f"spacing: distances of up to {float(np.max(np.abs(field.numpy()))) * h:.3g} do "
             f"not fit in {arr.dtype}; pass phi as float64 or express it in other units")
     return out
@@ -159,18 +159,18 @@ def point_distance(
         float32 array of shape ``grid.shape``, world units.
 
     Raises:
-        SceneError: If an argument is invalid.
+        InputError: If an argument is invalid.
     """
     if not isinstance(grid, Grid):
-        raise SceneError(f"grid: must be a warpspec.grid.Grid, got {type(grid).__name__}")
+        raise InputError(f"grid: must be a warpspec.grid.Grid, got {type(grid).__name__}")
     try:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
-        raise SceneError("points: must be a (K, 3) array of numbers") from None
+        raise InputError("points: must be a (K, 3) array of numbers") from None
     if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] < 1:
-        raise SceneError(f"points: must have shape (K, 3) with K >= 1, got {pts.shape}")
+        raise InputError(f"points: must have shape (K, 3) with K >= 1, got {pts.shape}")
     if not np.all(np.isfinite(pts)):
-        raise SceneError("points: must be finite")
+        raise InputError("points: must be finite")
     if cap is not None:
         cap = _check_positive("cap", cap)
     dev = resolve_device(device)

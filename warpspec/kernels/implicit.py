@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from .rays import cell_corner, corner_weight, grid_coordinate, reflection_normal, slab, trilinear
+from .rays import reflection_normal, slab
+from .sampling import cell_corner, corner_weight, grid_coordinate, trilinear
 
 wp.set_module_options({"enable_backward": False})
 

@@ -8,7 +8,7 @@ corner's bit set where ``phi >= 0``: their triangles then wind outward, toward `
 (a sphere has positive volume; tests/test_marching.py checks it).
 
 Three launches, each over the nodes (or the band's nodes, as
-:func:`~warpspec.kernels.differences.build_band` encodes them), with one host read between
+:func:`~warpspec.kernels.band.build_band` encodes them), with one host read between
 the first and the others (to size the output):
 
 1. :func:`count_kernel`: how many crossing edges and triangles;
@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 from warp.geometry import IsoSurfaceMarchingCubes as _Tables
 
-from .differences import band_slot, unflatten
+from .band import band_slot, unflatten
 
 wp.set_module_options({"enable_backward": False})
 

@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from ..errors import SceneError
-from .differences import band_slot
+from ..errors import InputError
+from .band import band_slot
 
 wp.set_module_options({"enable_backward": False})
 
@@ -673,7 +673,7 @@ class Redistancer:
         passes: How many times the 8 sweeps are repeated.
 
     Raises:
-        SceneError: If ``method`` or ``band`` is unknown, ``passes`` is below 1, ``spacing`` is
+        InputError: If ``method`` or ``band`` is unknown, ``passes`` is below 1, ``spacing`` is
             not positive or ``shape`` is not 3 positive sizes.
     """
 
@@ -689,15 +689,15 @@ class Redistancer:
     ) -> None:
         shape = tuple(int(s) for s in shape)
         if len(shape) != 3 or min(shape) < 1:
-            raise SceneError(f"shape: must be 3 positive sizes, got {shape}")
+            raise InputError(f"shape: must be 3 positive sizes, got {shape}")
         if not spacing > 0.0:
-            raise SceneError(f"spacing: must be positive, got {spacing}")
+            raise InputError(f"spacing: must be positive, got {spacing}")
         if method not in METHODS:
-            raise SceneError(f"method: must be one of {METHODS}, got {method!r}")
+            raise InputError(f"method: must be one of {METHODS}, got {method!r}")
         if band not in BAND_MODES:
-            raise SceneError(f"band: must be one of {tuple(BAND_MODES)}, got {band!r}")
+            raise InputError(f"band: must be one of {tuple(BAND_MODES)}, got {band!r}")
         if int(passes) < 1:
-            raise SceneError(f"passes: must be at least 1, got {passes}")
+            raise InputError(f"passes: must be at least 1, got {passes}")
         self.device = wp.get_device(device)
         self.shape = shape
         self.spacing = float(spacing)
@@ -756,12 +756,12 @@ class Redistancer:
 
     def _check(self, array: wp.array, name: str) -> None:
         if tuple(array.shape) != self.shape or array.device != self.device:
-            raise SceneError(
+            raise InputError(
                 f"{name}: expected shape {self.shape} on {self.device}, "
                 f"got {tuple(array.shape)} on {array.device}"
             )
         if array.dtype != wp.float32:
-            raise SceneError(f"{name}: expected float32, got {array.dtype.__name__}")
+            raise InputError(f"{name}: expected float32, got {array.dtype.__name__}")
 
     def _sweep(self, pts: PointSet) -> None:
         mode = 0 if pts is self._no_points else 1
@@ -816,7 +816,7 @@ class Redistancer:
             ``phi`` had no zero crossing. Reading it (``.numpy()``) synchronises.
 
         Raises:
-            SceneError: If ``phi`` does not have this shape, device and dtype, or ``cap`` is
+            InputError: If ``phi`` does not have this shape, device and dtype, or ``cap`` is
                 not positive.
         """
         self._check(phi, "phi")
@@ -825,7 +825,7 @@ class Redistancer:
         elif cap > 0.0:
             start = float(cap)
         else:
-            raise SceneError(f"cap: must be a positive number of voxel widths, got {cap!r}")
+            raise InputError(f"cap: must be a positive number of voxel widths, got {cap!r}")
         self.band_count.zero_()
         self._active_rows.zero_()
         wp.launch(
@@ -871,7 +871,7 @@ class Redistancer:
 
         Args:
             phi: Level set of shape ``shape``, float32, on this device.
-            band: The band's nodes, as :func:`~warpspec.kernels.differences.build_band`
+            band: The band's nodes, as :func:`~warpspec.kernels.band.build_band`
                 encodes them.
             count: One int: how many entries of ``band`` are valid.
             size: Threads to launch: the band's size if known on the host, else the capacity
@@ -930,11 +930,11 @@ class Redistancer:
             cap: If given, distances above it are clamped to it.
 
         Raises:
-            SceneError: If ``out`` or ``points`` does not match this grid and device.
+            InputError: If ``out`` or ``points`` does not match this grid and device.
         """
         self._check(out, "out")
         if points.device != self.device or points.dtype != wp.vec3:
-            raise SceneError(
+            raise InputError(
                 f"points: expected a wp.vec3 array on {self.device}, "
                 f"got {points.dtype.__name__} on {points.device}"
             )

@@ -1,0 +1,447 @@
+"""The orchestrating class: a workspace, a narrow-band tracker and a start, driven by launches.
+
+``Reconstructor.step`` is nothing but launches; measures are reduced on the device and copied
+back only when asked for. The driver never loops over voxels on the host.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+import warp as wp
+
+from .._runtime import init, resolve_device
+from ..errors import InputError, ReconstructionError
+from ..grid import Grid
+from ..implicit import rejected_summary
+from ..kernels.flow import launch_flow_step, launch_flow_step_band
+from ..kernels.measures import MEASURE_SLOTS
+from ..mesh import (
+    crop_to_data_hull,
+    data_crop_limit,
+    is_open,
+    supported_components,
+    triangulate,
+    triangulate_device,
+)
+from ..options import DEFAULTS, OPTIONS, default_iterations
+from ..scene import Scene
+from ..verdict import SUPPORT_RADIUS
+from .starts import GivenStart, check_level_set, make_start
+from .state import Result, check_covers, load_state
+from .tracker import BandTracker
+from .workspace import Workspace
+
+__all__ = ["MEASURE_KEYS", "Reconstructor", "reconstruct"]
+
+MEASURE_KEYS = (
+    "iteration",
+    "normal_error",
+    "point_error",
+    "energy_normal",
+    "energy_point",
+    "energy_smooth",
+    "energy_total",
+    "active",
+    "misses",
+    "seconds",
+)
+
+
+class Reconstructor:
+    """Reconstruct a surface from a scene by level-set gradient descent (paper eq. 21).
+
+    Every option's default, unit and range is in :data:`warpspec.options.OPTIONS`.
+
+    Args:
+        scene: The scene (cameras, specularities, light, points).
+        resolution: Cells along the longest side of the domain (``None``: the default, 64).
+        alpha: Weight of the smoothness (surface area) term.
+        bulge: Bending ``c`` of the paper's start (eq. 23): a positive value moves it toward
+            the cameras by ``c`` times the distance to the nearest point.
+        bulge_cap: Cap ``d_max`` on that distance, in voxel widths (``None``: no cap).
+        device: Warp device or its name; ``None`` picks CUDA when available, else the CPU.
+        reinit_every: Reset ``phi`` to a signed distance every this many iterations (0: never).
+        point_weight: Rate ``w_P`` of the point term, in units of ``1/h^2`` (per unit time).
+            The exact decay holds the zero set where it is but cannot move it across a point;
+            a strong decay followed by reinitialisation snaps the zero set onto the node
+            nearest each point, so keep it small.
+        gaussian_width: Standard deviation ``eps`` of the point Gaussians, in voxel widths.
+        normal_radius: Radius ``r_N`` of the balls that carry the constraint normals, in voxel
+            widths.
+        cfl: Time step as a fraction of the parabolic limit ``h^2 / (6 (1 + alpha))``.
+        fit_iterations: Rounds of the height-field fit of ``start="height"``.
+        fit_degree: Highest total degree of that height field's polynomial.
+        start: The starting surface (:mod:`warpspec.solver.starts`): ``"implicit"`` (the
+            default: any shape and topology, fitted coarse to fine to the points and normals,
+            false highlights rejected), ``"height"`` (a height field over the paper's plane,
+            refined ``fit_iterations`` times) or ``"paper"`` (the paper's plane, bent by
+            ``bulge``).
+        margin: Margin around the points when the scene gives no domain, as a fraction of
+            the points' longest extent.
+        narrow_band: Update only the nodes within this many voxel widths of the zero set
+            (the band is rebuilt at every reinitialisation, so the zero set must move less
+            than ``narrow_band - 2`` voxels between two); ``None`` updates every node, as
+            does ``reinit_every=0``, which never rebuilds a band.
+        graph: Capture each iteration's launches as a Warp graph and replay it; ``None``
+            captures on CUDA, where it saves most launch overhead (on the CPU the band's size
+            changes at every reinitialisation, and each change costs a new capture).
+        grid: Use this grid instead of deriving one from the scene.
+        phi0: Start from this level set instead of ``start``: a :class:`Result` (its level
+            set and grid, e.g. ``Result.load(path)``) or an array on ``grid`` (or on the grid
+            derived from the scene).
+        resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used):
+            ``phi0=Result.load(resume)`` without meshing it.
+
+    Raises:
+        InputError: If an option is out of range or of the wrong type, the grid would not fit
+            on the device, ``phi0`` or ``resume`` is not a level set on a grid holding the
+            scene, or a grid is given twice (``resume`` or a ``Result`` with ``grid`` or
+            ``resolution``).
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        resolution: int | None = None,
+        alpha: float = DEFAULTS["alpha"],
+        bulge: float = DEFAULTS["bulge"],
+        bulge_cap: float | None = DEFAULTS["bulge_cap"],
+        device: str | None = None,
+        reinit_every: int = DEFAULTS["reinit_every"],
+        point_weight: float = DEFAULTS["point_weight"],
+        gaussian_width: float = DEFAULTS["gaussian_width"],
+        normal_radius: float = DEFAULTS["normal_radius"],
+        cfl: float = DEFAULTS["cfl"],
+        fit_iterations: int = DEFAULTS["fit_iterations"],
+        fit_degree: int = DEFAULTS["fit_degree"],
+        start: str = DEFAULTS["start"],
+        margin: float = DEFAULTS["margin"],
+        narrow_band: float | None = DEFAULTS["narrow_band"],
+        graph: bool | None = None,
+        grid: Grid | None = None,
+        phi0: Result | np.ndarray | None = None,
+        resume: str | os.PathLike | None = None,
+    ) -> None:
+        if not isinstance(scene, Scene):
+            raise InputError(f"scene: expected a warpspec.Scene, got {type(scene).__name__}")
+        if resume is not None and not isinstance(resume, str | os.PathLike):
+            raise InputError(f"resume: expected the path of a saved level set, got "
+                             f"{type(resume).__name__} {resume!r:.60}")
+        if grid is not None and not isinstance(grid, Grid):
+            raise InputError(f"grid: expected a warpspec.Grid, got {type(grid).__name__} "
+                             f"{grid!r:.60}")
+        given = {"resume": resume, "phi0": phi0}
+        if resume is not None and phi0 is not None:
+            raise InputError("resume: pass either resume or phi0, not both")
+        own_grid = resume is not None or isinstance(phi0, Result)
+        for name, value in (("grid", grid), ("resolution", resolution)):
+            if own_grid and value is not None:
+                which = "resume" if resume is not None else "phi0"
+                raise InputError(f"{name}: {which} brings its own grid; pass no {name} with it")
+        opts = {name: OPTIONS[name].check(value) for name, value in (
+            ("alpha", alpha), ("bulge", bulge), ("bulge_cap", bulge_cap),
+            ("reinit_every", reinit_every), ("point_weight", point_weight),
+            ("gaussian_width", gaussian_width), ("normal_radius", normal_radius),
+            ("cfl", cfl), ("fit_iterations", fit_iterations), ("fit_degree", fit_degree),
+            ("start", start), ("margin", margin), ("narrow_band", narrow_band))}
+        if opts["start"] == "implicit" and (opts["bulge"] != 0.0 or bulge_cap is not None):
+            raise InputError("bulge: bends the paper's plane only; the implicit start needs no "
+                             "bulge (pass start='paper' or 'height' to use one)")
+        self.scene = scene
+        self.alpha = opts["alpha"]
+        self.point_weight = opts["point_weight"]
+        self.reinit_every = opts["reinit_every"]
+        self.cfl = opts["cfl"]
+        self.start = opts["start"]
+
+        if resume is not None:
+            phi0, grid = load_state(resume)
+            check_covers(scene, grid, f"resume: {os.fspath(resume)!r}")
+        elif isinstance(phi0, Result):
+            phi0, grid = phi0.phi, phi0.grid
+            check_covers(scene, grid, "phi0")
+        elif grid is None:
+            resolution = OPTIONS["resolution"].check(
+                DEFAULTS["resolution"] if resolution is None else resolution)
+            lo, hi = scene.bounds(margin=opts["margin"])
+            grid = Grid.from_bounds(lo, hi, resolution=resolution)
+        if phi0 is not None:
+            strategy = GivenStart(check_level_set(phi0, grid, next(
+                k for k, v in given.items() if v is not None)))
+        else:
+            strategy = make_start(self.start, bulge=opts["bulge"], bulge_cap=opts["bulge_cap"],
+                                  fit_iterations=opts["fit_iterations"],
+                                  fit_degree=opts["fit_degree"])
+        self.grid = grid
+        self.device = resolve_device(device)
+        self.workspace = Workspace(scene, grid, self.device,
+                                   gaussian_width=opts["gaussian_width"],
+                                   normal_radius=opts["normal_radius"],
+                                   band=opts["narrow_band"] is not None and self.reinit_every > 0)
+        self._tracker = BandTracker(self.workspace, width=opts["narrow_band"])
+        self.workspace.far_cap = self._tracker.far_cap
+
+        h = grid.spacing
+        self.dt = self.cfl * h * h / (6.0 * (1.0 + self.alpha))
+        self.w_point = self.point_weight / (h * h)
+        eps = opts["gaussian_width"] * h
+        self.point_energy_weight = self.w_point * (2.0 * math.pi) ** 1.5 * eps**3
+        self.iteration = 0
+        self.history: list[dict] = []
+        self._graphs: dict = {}
+        self._clock = 0.0
+        self.graph = self.device.is_cuda if graph is None else bool(graph)
+
+        outcome = strategy.build(scene, self.workspace)
+        self.start_surface = strategy
+        self.fit_report = outcome.report
+        self.bent_phi, self.initial_phi = outcome.bent, outcome.initial
+        if outcome.keep is not None:
+            self.workspace.use_rays(outcome.keep)
+        self._tracker.keep_good(0)
+        self._tracker.rebuild()
+        self.workspace.intersect()
+
+    def __repr__(self) -> str:
+        return (f"Reconstructor({self.grid!r}, start={self.start!r}, iteration "
+                f"{self.iteration}, {self.device.alias})")
+
+    @property
+    def phi(self) -> np.ndarray:
+        """A host copy of the current level set: changing it changes nothing in the solver.
+
+        The live device array is ``workspace.phi``; each step writes its twin and swaps them.
+        """
+        return self.workspace.phi.numpy().copy()
+
+    # -- iteration ------------------------------------------------------------------------
+
+    def _reinitialize(self) -> None:
+        """Check ``phi``, redistance it, rebuild the band and keep it as the last good state.
+
+        Raises:
+            ReconstructionError: If ``phi`` holds a non-finite value; the last good state is
+                restored first.
+        """
+        self._check_finite()
+        self._tracker.reinitialize(self.iteration)
+
+    def _check_finite(self, sums: np.ndarray | None = None) -> None:
+        sums = self._tracker.sums() if sums is None else sums
+        bad = self._tracker.nonfinite(sums)
+        if bad == 0:
+            return
+        failed = self.iteration
+        self.iteration = self._tracker.roll_back()
+        self.history = [m for m in self.history if m["iteration"] <= self.iteration]
+        raise ReconstructionError(
+            f"iteration {failed}: phi has {bad} non-finite values; the solver is back at the "
+            f"state of iteration {self.iteration}; lower cfl or point_weight"
+        )
+
+    def step(self) -> None:
+        """Advance one iteration: intersect the rays, take one flow step, reinitialise on time."""
+        self._step()
+
+    def _step(self, *, normal: bool = True, smooth: bool = True, points: bool = True,
+              intersect: bool = True) -> None:
+        """One iteration, with terms switched off (for tests).
+
+        ``intersect=False`` keeps the last intersections: the flow then descends the normal
+        energy of fixed hits.
+        """
+        ws = self.workspace
+        if normal and smooth and points and intersect and self.graph:
+            key = (id(ws.phi), self._tracker.size)
+            graph = self._graphs.get(key)
+            if graph is None:
+                if self.device.is_cpu:  # the band's size changed: older graphs are stale
+                    self._graphs.clear()
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._launch_step(True, True, True, True)
+                graph = self._graphs[key] = capture.graph
+            wp.capture_launch(graph)
+        else:
+            if intersect:
+                ws.current_hits()
+            self._launch_step(normal, smooth, points, False)
+        ws.swap()
+        self.iteration += 1
+        if self.reinit_every and self.iteration % self.reinit_every == 0:
+            self._reinitialize()
+
+    def _launch_step(self, normal: bool, smooth: bool, points: bool, intersect: bool) -> None:
+        """The launches of one iteration, from ``phi`` into its ping-pong twin."""
+        ws = self.workspace
+        if intersect:
+            ws.intersect()
+        weights = {
+            "spacing": self.grid.spacing,
+            "dt": self.dt,
+            "normal_weight": 1.0 if normal else 0.0,
+            "alpha": self.alpha if smooth else 0.0,
+            "point_weight": self.w_point if points else 0.0,
+        }
+        if ws.band is None:
+            launch_flow_step(ws.phi, ws.owner, ws.normals, ws.gauss, ws.tmp, **weights)
+        else:
+            launch_flow_step_band(ws.phi, ws.owner, ws.normals, ws.gauss, ws.band,
+                                  ws.band_count, ws.tmp, size=self._tracker.size, **weights)
+
+    def reinitialize(self) -> None:
+        """Reset ``phi`` to the signed distance to its zero set now."""
+        self._reinitialize()
+
+    def measures(self, *, intersect: bool = True) -> dict:
+        """Reduce the measures of the current state on the device and return them.
+
+        Args:
+            intersect: Intersect the rays with the current ``phi`` first (``False`` measures
+                against the intersections of the last step).
+
+        Raises:
+            ReconstructionError: If ``phi`` holds a non-finite value.
+        """
+        if intersect:
+            self.workspace.current_hits()
+        s = self._tracker.sums()
+        self._check_finite(s)
+        active = int(s[MEASURE_SLOTS["active"]])
+        npts = max(self.scene.num_points, 1)
+        e_n = float(s[MEASURE_SLOTS["energy_normal"]])
+        # E_P = sum |phi(y)|, weighted as the flow weighs it: w_P times the Gaussian's volume.
+        e_p = self.point_energy_weight * float(s[MEASURE_SLOTS["point_abs_sum"]])
+        e_s = float(s[MEASURE_SLOTS["energy_smooth"]])
+        return {
+            "iteration": self.iteration,
+            "normal_error": float(s[MEASURE_SLOTS["normal_error_sum"]] / active) if active
+            else float("nan"),
+            "point_error": float(s[MEASURE_SLOTS["point_abs_sum"]] / npts / self.grid.spacing)
+            if self.scene.num_points else float("nan"),
+            "energy_normal": e_n,
+            "energy_point": e_p,
+            "energy_smooth": e_s,
+            "energy_total": e_n + e_p + self.alpha * e_s,
+            "active": active,
+            "misses": int(s[MEASURE_SLOTS["misses"]]),
+            "seconds": self._clock,
+        }
+
+    def run(
+        self,
+        iterations: int,
+        *,
+        measure_every: int = DEFAULTS["measure_every"],
+        callback: Callable[[dict], None] | None = None,
+    ) -> list[dict]:
+        """Advance ``iterations`` steps, recording measures every ``measure_every`` of them.
+
+        The measures of the start (when ``history`` is empty) and of the last iteration are
+        always recorded.
+
+        Args:
+            iterations: Number of iterations.
+            measure_every: Record the measures every this many iterations (0, the default:
+                only the last). Each record is a reduction over the narrow band and a
+                synchronisation with the device: about 15% of an iteration at 64^3 on the
+                CPU.
+            callback: Called with each recorded measure dict (progress display).
+
+        Returns:
+            The measures recorded during this call (also appended to ``history``).
+        """
+        iterations = OPTIONS["iterations"].check(iterations)
+        measure_every = OPTIONS["measure_every"].check(measure_every)
+        recorded = []
+        if not self.history:
+            self._record(recorded, callback)
+        for n in range(1, iterations + 1):
+            start = time.perf_counter()
+            self.step()
+            self._clock += time.perf_counter() - start
+            if (measure_every and n % measure_every == 0) or n == iterations:
+                self._record(recorded, callback)
+        return recorded
+
+    def _record(self, recorded: list, callback: Callable[[dict], None] | None) -> None:
+        m = self.measures()
+        self.history.append(m)
+        recorded.append(m)
+        if callback is not None:
+            callback(m)
+
+    @property
+    def default_iterations(self) -> int:
+        """Iterations of the flow the automatic schedule gives this grid."""
+        return default_iterations(max(self.grid.shape) - 1)
+
+    def result(self, *, crop: bool = True) -> Result:
+        """The current surface as a :class:`Result` (mesh, level set, grid, history).
+
+        Args:
+            crop: Crop an open surface to where the data reaches: the faces inside the convex
+                hull of the rays' hits and the points, grown by the median gap between them
+                (at least three voxels; :func:`warpspec.mesh.crop_to_data_hull`). Beyond it
+                the surface is the fit's extrapolation, which no constraint speaks for. A
+                closed surface is never cropped. ``False`` keeps the whole zero set.
+
+        Raises:
+            ReconstructionError: If the zero set has left the domain (no surface to mesh).
+        """
+        phi = self.phi
+        ws = self.workspace
+        hits = ws.scene_hits(self.scene.num_specularities)
+        if ws.band is not None and self._tracker.width >= 2.0:
+            # on the device, over the band's cells: no full grid through marching cubes
+            vertices, faces = triangulate_device(ws.phi, self.grid, band=ws.band,
+                                                 count=ws.band_count)
+        else:
+            vertices, faces = triangulate(phi, self.grid)
+        anchors = np.vstack([hits[np.all(np.isfinite(hits), axis=1)],
+                             self.scene.points.reshape(-1, 3)])
+        vertices, faces = supported_components(vertices, faces, anchors,
+                                               radius=SUPPORT_RADIUS * self.grid.spacing)
+        if crop and is_open(faces):
+            # between anchors a curved surface bulges past their hull by up to about the gap
+            # between neighbours: the margin is that gap, at least SUPPORT_RADIUS voxels
+            h = self.grid.spacing
+            margin = data_crop_limit(anchors, h, floor=SUPPORT_RADIUS, spread=1.0) * h
+            vertices, faces = crop_to_data_hull(vertices, faces, anchors, margin=margin)
+        rejected = ([] if self.fit_report is None
+                    else rejected_summary(self.fit_report, self.scene))
+        result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
+                        history=list(self.history), hits=hits, rejected=rejected)
+        result.assess(self.scene)
+        return result
+
+
+def reconstruct(scene: Scene | str | os.PathLike, *,
+                iterations: int | None = DEFAULTS["iterations"], **options) -> Result:
+    """Reconstruct a surface in one call.
+
+    Args:
+        scene: A :class:`Scene` or the path of a scene file.
+        iterations: Number of iterations of the flow; ``None`` (the default) chooses it from
+            the resolution (:func:`warpspec.options.default_iterations`: 300 up to 64 cells,
+            fewer on finer grids, whose start is already solved coarse to fine).
+        **options: Keyword options of :class:`Reconstructor`.
+
+    Returns:
+        The :class:`Result`, with its :attr:`~Result.verdict` and :attr:`~Result.support`.
+
+    Raises:
+        InputError: For a bad option or file (``SceneError`` for a field of the scene).
+        ReconstructionError: If the run fails (a non-finite level set, no surface).
+    """
+    init()
+    if not isinstance(scene, Scene):
+        scene = Scene.load(scene)
+    solver = Reconstructor(scene, **options)
+    solver.run(solver.default_iterations if iterations is None else iterations)
+    return solver.result()
