@@ -555,3 +555,17 @@ def test_quaternion_round_trip():
         R = Rotation.from_euler("xyz", angles).as_matrix()
         np.testing.assert_allclose(rotation_from_quaternion(quaternion_from_rotation(R)), R,
                                    atol=1e-12)
+
+
+def test_object_points_of_a_sphere_that_fills_the_frame_are_kept():
+    """A flash on a sphere sends every ray through its centre: the rays' region has no size,
+    and the sphere may overfill the frame; its points are kept, the far background not."""
+    from warpspec.colmap import select_object_points
+
+    rng = np.random.default_rng(2)
+    on_sphere = rng.normal(size=(12, 3))
+    on_sphere *= 1.07 / np.linalg.norm(on_sphere, axis=1, keepdims=True)
+    far = rng.uniform(-6, 6, size=(40, 3))
+    far = far[np.linalg.norm(far, axis=1) > 3.0]
+    mask, _ = select_object_points(np.vstack([on_sphere, far]), (np.zeros(3), 1e-4), 1.03)
+    assert mask[:12].all() and not mask[12:].any()

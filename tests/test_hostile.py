@@ -609,3 +609,13 @@ def test_written_files_follow_the_umask(folder):
     from warpspec._atomic import _UMASK
 
     assert (folder / "copy.json").stat().st_mode & 0o777 == 0o666 & ~_UMASK
+
+
+def test_a_scene_without_points_is_not_supported():
+    """Highlights alone fix the shape, not the depth: the verdict says so."""
+    data = json.loads(OCTANT.read_text())
+    data["points"] = []
+    scene = ws.Scene.from_dict(data)
+    result = ws.reconstruct(scene, iterations=5, resolution=20, start="paper", device="cpu")
+    assert not result.verdict.supported
+    assert any("no point constraints" in r for r in result.verdict.reasons)

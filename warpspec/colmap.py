@@ -1023,14 +1023,20 @@ def ray_region(origins: np.ndarray, dirs: np.ndarray, cams: np.ndarray
 
 
 def _frame_radius(centre: np.ndarray, matrices: np.ndarray, sizes: np.ndarray) -> float:
-    """Half the smaller side of a typical image, in world units at the object's distance."""
+    """Half the smaller side of a typical image, in world units at the object's distance.
+
+    The focal lengths come from ``M M^T = K K^T`` (``P = [M | p4]``, ``M = K R``, no skew):
+    ``fx^2 = A00 / A22 - (A02 / A22)^2`` and likewise ``fy``.
+    """
     radii = []
     for P, (w, h) in zip(matrices, sizes, strict=True):
         M = P[:, :3]
         c = -np.linalg.solve(M, P[:, 3])
-        rows = np.linalg.norm(M, axis=1)  # K R: rows 1 and 2 scale about as fx, fy
-        f = min(rows[0], rows[1]) / max(rows[2], 1e-300)
-        radii.append(np.linalg.norm(c - centre) * 0.5 * min(w, h) / f)
+        A = M @ M.T
+        a = A / A[2, 2]
+        fx = np.sqrt(max(a[0, 0] - a[0, 2] ** 2, 1e-300))
+        fy = np.sqrt(max(a[1, 1] - a[1, 2] ** 2, 1e-300))
+        radii.append(np.linalg.norm(c - centre) * 0.5 * min(w / fx, h / fy))
     return float(np.median(radii))
 
 
@@ -1070,9 +1076,10 @@ def select_object_points(
 ) -> tuple[np.ndarray, float]:
     """The points of the object, not the background: near where the highlight rays meet.
 
-    A point is kept when it lies within ``R = max(1.5 * ray radius, frame radius)`` of the
-    rays' centre (the object fits in the photographs, so it is no larger than the frame at its
-    distance) and not on a large background plane such as a table or a wall
+    A point is kept when it lies within ``1.5 R``, ``R = max(1.5 * ray radius, frame radius)``,
+    of the rays' centre (an object photographed whole reaches little further from its centre
+    than half the frame at its distance; a flash on a sphere sends every ray through the
+    centre, so the rays alone say nothing of its size) and not on a large background plane such as a table or a wall
     (:func:`_background_planes`, tolerance ``R / 50``, planes drawn from the points beyond
     ``2 R``).
 
@@ -1083,7 +1090,7 @@ def select_object_points(
     R = max(1.5 * ray_radius, frame_radius)
     dist = np.linalg.norm(xyz - centre, axis=1)
     planes = _background_planes(xyz, dist <= 2 * R, R / 50, np.random.default_rng(seed))
-    return (dist <= R) & ~planes, R
+    return (dist <= 1.5 * R) & ~planes, R
 
 
 def _ray_box(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -204,6 +204,11 @@ def assess(
     if not ok.any() and not len(points):
         reasons.append("no constraint is on the surface: no ray meets it and the scene has "
                        "no points")
+    elif rays and not len(points):
+        # The normals fix the shape, not the depth: every offset of a surface seen by a flash
+        # obeys the same normals, and nearly every one under a distant light.
+        reasons.append("the scene has no point constraints, so nothing fixes the surface's "
+                       "depth along the rays; add points (structure from motion gives them)")
     anchors = np.vstack([hits[ok], points])
     support = support_distance(vertices, anchors, h)
     supported_fraction = float(np.mean(support <= SUPPORT_RADIUS)) if len(support) else 0.0
