@@ -106,3 +106,22 @@ def test_files_and_folders(tmp_path):
     bad.write_text("not a png")
     with pytest.raises(ws.SceneError, match=r"bad.png: cannot read it as an image"):
         read_image(bad)
+
+
+def test_a_streak_along_a_cylinder_is_one_highlight_at_its_centre():
+    """A flash on a cylinder gives a streak along the axis: narrow, long, centred on the
+    specular point. It is found at its centre; a bright patch wide every way is not."""
+    shape = (120, 160)
+    rows, cols = np.indices(shape, dtype=np.float64)
+    u0, v0 = 70.3, 58.6
+    img = 0.25 + 0.05 * np.sin(cols / 7.0)
+    acc = np.zeros(shape)
+    for a in (0.125, 0.375, 0.625, 0.875):
+        for b in (0.125, 0.375, 0.625, 0.875):
+            acc += np.exp(-((cols + a - u0) ** 2) / (2 * 1.2**2)
+                          - ((rows + b - v0) ** 2) / (2 * 7.0**2))
+    img = img + 3.0 * acc / 16
+    img[20:45, 110:140] = 1.0  # a window: saturated, wide in both directions
+    rows_found = detect_highlights(np.clip(img, 0, 1))
+    assert len(rows_found) == 1
+    assert np.hypot(rows_found[0, 0] - u0, rows_found[0, 1] - v0) < 0.1

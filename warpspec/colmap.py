@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import InputError, SceneError
 from .scene import Light, Scene, SceneWarning
 
 __all__ = [
@@ -870,6 +870,10 @@ def read_highlights(path: str | os.PathLike) -> list[tuple[int, str, float, floa
         u = _float(row[1].strip(), path, n, "u")
         v = _float(row[2].strip(), path, n, "v")
         rows.append((n, name, u, v))
+    if not rows:
+        raise InputError(f"{path}: holds no highlight (no image,u,v row): there is nothing to "
+                         "reconstruct from; run 'warpspec detect' on the photographs, or check "
+                         "its thresholds")
     return rows
 
 
@@ -1079,7 +1083,8 @@ def select_object_points(
     A point is kept when it lies within ``1.5 R``, ``R = max(1.5 * ray radius, frame radius)``,
     of the rays' centre (an object photographed whole reaches little further from its centre
     than half the frame at its distance; a flash on a sphere sends every ray through the
-    centre, so the rays alone say nothing of its size) and not on a large background plane such as a table or a wall
+    centre, so the rays alone say nothing of its size) and not on a large background plane
+    such as a table or a wall
     (:func:`_background_planes`, tolerance ``R / 50``, planes drawn from the points beyond
     ``2 R``).
 

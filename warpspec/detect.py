@@ -9,7 +9,8 @@ near the sensor's saturation. :func:`detect_highlights` works on the luminance o
    smoothed by a Gaussian of 0.7 px (sensor noise);
 2. candidates: connected regions (scikit-image ``label``) where the smoothed image stands at
    least ``min_contrast`` above the background and whose brightest pixel reaches ``min_peak``
-   of full scale; regions larger than the disc are not highlights (bright texture, a lamp);
+   of full scale; regions wider than the disc are not highlights (bright texture, a lamp), nor
+   longer than STREAK_LENGTH discs (a cylinder's highlight under a flash is a streak);
 3. centre: each candidate grows to the connected region where the image stands more than
    ``0.3 * min_contrast`` above the background, and its centre is the weighted centroid
    (label-wise sums) of the raw image minus background minus that level, so a
@@ -153,6 +154,10 @@ def model_points(model_dir: str | os.PathLike) -> dict[str, np.ndarray]:
     return out
 
 
+STREAK_LENGTH = 10.0
+"""Longest highlight, in areas of the background disc: a streak along a cylinder's axis."""
+
+
 def detect_highlights(
     image: np.ndarray,
     *,
@@ -237,9 +242,13 @@ def detect_highlights(
     rr, cc = np.indices(grown.shape)
     cy = ndimage.sum(w * rr, grown, labels) / sums
     cx = ndimage.sum(w * cc, grown, labels) / sums
+    # A highlight is narrow: as wide as the disc at most, and at most STREAK_LENGTH discs
+    # long (a cylinder or a bottle under a flash shows a streak along its axis, centred on the
+    # specular point); bright texture, a lamp or a window is wide every way.
+    widths = {p.label: p.axis_minor_length for p in regionprops(np.where(mask, grown, 0))}
     out = []
-    for k, (_, r, c) in enumerate(rows):
-        if area[k] > max_area:
+    for k, (g, r, c) in enumerate(rows):
+        if area[k] > STREAK_LENGTH * max_area or widths[g] > 2.0 * radius + 1.0:
             continue  # too large for a highlight: bright texture, a lamp, a window
         out.append((cx[k] + 0.5, cy[k] + 0.5, grey[r, c], area[k], above[r, c]))
     result = np.array(out, dtype=np.float64).reshape(-1, 5)
