@@ -228,7 +228,8 @@ def measure(args: argparse.Namespace) -> tuple[list[dict], list[dict]]:
                 warm_label = ("warm (same cache)" if runner in caches
                               else "warm (existing cache)")
                 if "warm" in args.modes:
-                    for _ in range(args.repeats):
+                    repeats = args.repeats if resolution <= 256 else args.large_repeats
+                    for _ in range(repeats):
                         runs.setdefault(warm_label, []).append(
                             run_once(runner, args, resolution, cache, work))
                 for label, samples in runs.items():
@@ -334,6 +335,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     parser.add_argument("--iterations", type=int, default=None,
                         help="iterations of the flow (default: the schedule for the grid)")
     parser.add_argument("--repeats", type=int, default=3, help="warm runs per runner (median)")
+    parser.add_argument("--large-repeats", type=int, default=1,
+                        help="warm runs per runner at grids above 256 (minutes each on a CPU)")
     parser.add_argument("--cold-repeats", type=int, default=1,
                         help="cold runs per runner, each on a new empty cache (median), at "
                              "the first resolution")

@@ -3,9 +3,10 @@
 Each script runs in its own process (``sys.executable``), one after the other, so that their
 timings do not overlap; the peers (the NumPy step, scikit-fmm) are timed in the same process
 as warpspec, side by side. ``--sizes`` sets the grids of the iteration benchmark and of the
-octant end to end per stage (set-up, iterations, meshing, end to end, peak memory); a size
-above 256 runs the octant only on the CPU (one iteration at 512^3 needs CUDA). The results
-are checked against the project's targets, in a table at the top.
+octant end to end per stage (set-up, iterations, meshing, end to end, peak memory). Above
+256 the iteration benchmark runs only on CUDA (its NumPy peer would take minutes a step), and
+the octant is run once per runner whatever ``--repeats`` says. The results are checked
+against the project's targets, in a table at the top.
 
     python benchmarks/run_all.py [--device cpu] [--repeats N] [--sizes 64 128 256 [512]]
     python benchmarks/run_all.py --smoke          # tiny sizes, seconds; for CI
