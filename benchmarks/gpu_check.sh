@@ -6,11 +6,14 @@
 #   options: --python PY (use this interpreter, no venv), --tests "PATHS" (default: tests)
 #
 # It makes a venv (.venv-gpu-check), installs '.[dev]' (with --python PY it uses that
-# interpreter as is instead), runs the test suite (the device-parametrised tests run on
-# cuda:0 when Warp sees a GPU), the CPU/CUDA agreement test, then the benchmarks at each size:
-# one iteration, redistance, and the octant end to end through the command line. Every step
-# has its own time limit and a failure does not stop the others; the end prints one markdown
-# table of all steps. Without a GPU everything runs on the CPU (say so in the table).
+# interpreter as is instead: needed where pip cannot reach an index), runs the test suite (the
+# device-parametrised tests run on cuda:0 when Warp sees a GPU), the CPU/CUDA agreement test,
+# then the benchmarks at each size: one iteration, redistance (full and capped as the solver
+# caps it), and the octant end to end with default options (the scheduled iterations) through
+# the API, per stage (set-up, iterations, meshing, peak memory), and the command line, with
+# its accuracy against the true sphere. Every step has its own time limit and a failure does
+# not stop the others; the end prints one markdown table of all steps. Without a GPU
+# everything runs on the CPU (say so in the table).
 set -u
 
 SIZES="128 256 512"
@@ -22,7 +25,7 @@ while [ $# -gt 0 ]; do
         --sizes) SIZES="$2"; shift 2 ;;
         --python) PY="$2"; shift 2 ;;
         --tests) TESTS="$2"; shift 2 ;;
-        -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
         *) echo "gpu_check: unknown argument $1 (use --sizes \"N ...\", --python PY, --tests PATHS)"
            exit 2 ;;
     esac
@@ -103,9 +106,9 @@ for n in $SIZES; do
     [ "$n" -gt 128 ] && peers="--no-peers"   # scikit-fmm: 80 s at 256^3, minutes at 512^3
     step "redistance at ${n}^3" 60 "$PY" benchmarks/bench_redistance.py --sizes "$n" \
         --repeats 1 --device "$DEVICE" $peers
-    step "octant end to end (cli) at ${n}^3" 75 "$PY" benchmarks/bench_octant.py \
-        --resolution "$n" --iterations 300 --repeats 1 --modes warm --runners cli \
-        --device "$DEVICE"
+    # the last row printed is the API run's stages: set-up, iterations, meshing, memory
+    step "octant end to end (cli, api) at ${n}^3" 120 "$PY" benchmarks/bench_octant.py \
+        --resolutions "$n" --repeats 1 --modes warm --runners cli api --device "$DEVICE"
 done
 
 echo

@@ -164,20 +164,38 @@ def _flag_message(exc: InputError) -> InputError:
 
 
 class _Progress:
-    """A progress bar over iterations (tqdm), or nothing when quiet or not on a terminal.
+    """What a run is doing, on stderr: one line per set-up stage and a bar over iterations.
 
-    The bar appears only once a run has lasted a second.
+    Nothing is shown when quiet or not on a terminal. The bar (tqdm) appears only once the
+    iterations have lasted a second.
     """
 
-    def __init__(self, total: int, enabled: bool) -> None:
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
         self.bar = None
-        if enabled:
+        self.first = None
+        self.last = 0
+        self._began: dict[str, float] = {}
+
+    def stage(self, name: str, detail: str = "") -> None:
+        """Announce that the stage ``name`` begins (``detail`` says what it does)."""
+        self._began[name] = time.perf_counter()
+        if self.enabled:
+            _say(f"{name}: {detail}" if detail else f"{name} ...")
+
+    def done(self, name: str) -> None:
+        """Say how long the stage ``name`` took."""
+        began = self._began.pop(name, None)
+        if self.enabled and began is not None:
+            _say(f"{name}: done in {time.perf_counter() - began:.1f} s")
+
+    def iterations(self, total: int) -> None:
+        """Show the bar over ``total`` iterations."""
+        if self.enabled:
             from tqdm import tqdm
 
             self.bar = tqdm(total=total, unit="it", file=sys.stderr, leave=True, delay=1.0,
                             dynamic_ncols=True)
-        self.first = None
-        self.last = 0
 
     def __call__(self, m: dict) -> None:
         if self.bar is None:
@@ -194,6 +212,22 @@ class _Progress:
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
+            self.bar = None
+
+
+def _setup_detail(start: str, resolution: int | None, resume: Path | None) -> str:
+    """What the set-up does, in a few words: the start and the grids it is solved on."""
+    from .implicit import level_ladder
+    from .options import DEFAULTS
+
+    if resume is not None:
+        return f"the level set saved in {resume}"
+    resolution = DEFAULTS["resolution"] if resolution is None else resolution
+    if start == "implicit":
+        grids = " ... ".join(str(n) for n in level_ladder(resolution))
+        return (f"the implicit start: a quadric, refined on grids {grids} where it does "
+                "not fit the data")
+    return f"the {start} start on a {resolution}-cell grid"
 
 
 def _say(text: str) -> None:
@@ -308,6 +342,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         from .solver import Reconstructor
 
         start = time.perf_counter()
+        progress = _Progress(enabled=not args.quiet and sys.stderr.isatty())
+        progress.stage("set-up", _setup_detail(args.start, args.resolution, resume))
         solver = Reconstructor(
             scene,
             resolution=None if resume is not None else args.resolution,
@@ -322,8 +358,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     except InputError as exc:
         raise _flag_message(exc) from None
 
+    progress.done("set-up")
     iterations = solver.default_iterations if args.iterations is None else args.iterations
-    progress = _Progress(iterations, enabled=not args.quiet and sys.stderr.isatty())
+    progress.iterations(iterations)
     measure_every = args.measure_every
     if measure_every is None:
         measure_every = 1 if (metrics or plot) else (10 if progress.bar is not None else 0)
@@ -331,7 +368,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         solver.run(iterations, measure_every=measure_every, callback=progress)
     finally:
         progress.close()
+    progress.stage("meshing", "the zero set's triangles, the support map and the verdict")
     result = solver.result(crop=args.crop == "auto")
+    progress.done("meshing")
     verdict = result.verdict
     if not verdict.supported and not args.keep_unsupported:
         _say(f"{verdict.summary()}; nothing was written (--keep-unsupported writes the "
