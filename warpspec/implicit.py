@@ -332,9 +332,11 @@ class ImplicitStart:
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
         else:
-            if guess.kind == "plane":
-                # seen from one side: the prior is a quadratic height field over the plane,
-                # which has one sheet (a general quadric may close a second one in the domain)
+            if guess.kind == "plane" and self.quadric.sheets_crossed(
+                    *self.scene.rays(), lo, hi) > 1:
+                # seen from one side, a surface is crossed once by each ray; a general quadric
+                # that a ray crosses twice in the domain closes a second sheet there, so the
+                # prior is a quadratic height field over the plane instead (one sheet)
                 self.quadric, _, _ = Q.fit_quadric(
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))

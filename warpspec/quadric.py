@@ -112,11 +112,22 @@ class Quadric:
         anchors = self.centre + self.scale * (o + np.nan_to_num(t)[:, None] * d)
         return anchors, crossing, inside_box
 
-    def is_closed_in(self, lo: np.ndarray, hi: np.ndarray) -> bool:
-        """Whether ``q > 0`` on all eight corners of the box (a surface that closes inside)."""
-        corners = np.array([[lo[0] if i & 1 == 0 else hi[0], lo[1] if i & 2 == 0 else hi[1],
-                             lo[2] if i & 4 == 0 else hi[2]] for i in range(8)])
-        return bool(np.all(self.value(corners) > 0))
+    def sheets_crossed(self, origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray,
+                       hi: np.ndarray) -> int:
+        """Most roots of ``q`` that one ray meets inside the box (0, 1 or 2)."""
+        A, b, c = self.matrix()
+        o = (origins - self.centre) / self.scale
+        t0, t1 = _slab(o, dirs, (lo - self.centre) / self.scale, (hi - self.centre) / self.scale)
+        qa = np.einsum("ij,jk,ik->i", dirs, A, dirs)
+        qb = 2.0 * np.einsum("ij,jk,ik->i", dirs, A, o) + dirs @ b
+        qc = np.einsum("ij,jk,ik->i", o, A, o) + o @ b + c
+        with np.errstate(all="ignore"):
+            disc = qb * qb - 4.0 * qa * qc
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            roots = np.stack([(-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa)])
+            inside = (disc >= 0) & np.isfinite(roots) & (roots >= t0) & (roots <= t1) \
+                & (t0 <= t1)
+        return int(inside.sum(axis=0).max()) if len(o) else 0
 
 
 def _slab(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray):
