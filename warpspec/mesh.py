@@ -323,6 +323,12 @@ def is_open(faces: np.ndarray) -> bool:
     return bool(np.any(counts == 1))
 
 
+HULL_ANCHORS = 4096
+"""Most anchors :func:`crop_to_data_hull` builds its hulls from (an even subset beyond)."""
+HULL_CHUNK = 2**22
+"""Face-facet pairs tested at once by :func:`crop_to_data_hull` (32 MiB of float64)."""
+
+
 def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *,
                       margin: float) -> tuple[np.ndarray, np.ndarray]:
     """Keep the faces whose centres lie within ``margin`` of the anchors' convex hulls.
@@ -344,6 +350,9 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
     faces = np.asarray(faces)
     if len(anchors) < 4 or len(faces) == 0:
         return vertices, faces
+    if len(anchors) > HULL_ANCHORS:
+        # a dense cloud: its hull is as good from an even subset, and the facets stay few
+        anchors = anchors[np.linspace(0, len(anchors) - 1, HULL_ANCHORS).astype(np.int64)]
     centre = anchors.mean(axis=0)
     scale = float(np.max(np.abs(anchors - centre))) or 1.0
     a = (anchors - centre) / scale
@@ -357,7 +366,11 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
         except (QhullError, ValueError):
             continue
         d = hull.equations.shape[1] - 1
-        keep &= (queries @ hull.equations[:, :d].T + hull.equations[:, d]).max(axis=1) <= m
+        normals, offsets = hull.equations[:, :d].T, hull.equations[:, d]
+        chunk = max(1, HULL_CHUNK // len(offsets))  # bounded memory: faces x facets
+        for k in range(0, len(queries), chunk):
+            q = queries[k:k + chunk]
+            keep[k:k + chunk] &= (q @ normals + offsets).max(axis=1) <= m
     if not keep.any() or keep.all():
         return vertices, faces
     kept = faces[keep]
