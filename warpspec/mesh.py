@@ -378,20 +378,3 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
     index = np.full(len(vertices), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
     return np.asarray(vertices)[used], index[kept]
-
-
-def data_crop_limit(anchors: np.ndarray, spacing: float, *, floor: float,
-                    spread: float = 1.0) -> float:
-    """How far, in voxels, the data reaches beyond its anchors on an open surface.
-
-    ``spread`` times the median distance from an anchor to its nearest neighbour (the gap
-    that a curved surface between two anchors bulges across), at least ``floor``.
-    """
-    from scipy.spatial import cKDTree
-
-    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
-    if len(anchors) < 2:
-        return floor
-    grid_units = (anchors - anchors.min(axis=0)) / spacing
-    dist, _ = cKDTree(grid_units).query(grid_units, k=2)
-    return max(floor, spread * float(np.median(dist[:, 1])))

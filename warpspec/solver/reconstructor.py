@@ -22,7 +22,6 @@ from ..kernels.flow import launch_flow_step, launch_flow_step_band
 from ..kernels.measures import MEASURE_SLOTS
 from ..mesh import (
     crop_to_data_hull,
-    data_crop_limit,
     is_open,
     supported_components,
     triangulate,
@@ -386,10 +385,10 @@ class Reconstructor:
 
         Args:
             crop: Crop an open surface to where the data reaches: the faces inside the convex
-                hull of the rays' hits and the points, grown by the median gap between them
-                (at least three voxels; :func:`warpspec.mesh.crop_to_data_hull`). Beyond it
-                the surface is the fit's extrapolation, which no constraint speaks for. A
-                closed surface is never cropped. ``False`` keeps the whole zero set.
+                hull of the rays' hits and the points, grown by :data:`CROP_MARGIN` of the
+                domain (:func:`warpspec.mesh.crop_to_data_hull`; three voxels at resolution 64).
+                Beyond it the surface is the fit's extrapolation, which no constraint speaks
+                for. A closed surface is never cropped. ``False`` keeps the whole zero set.
 
         Raises:
             ReconstructionError: If the zero set has left the domain (no surface to mesh).
@@ -408,10 +407,9 @@ class Reconstructor:
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing)
         if crop and is_open(faces):
-            # between anchors a curved surface bulges past their hull by up to about the gap
-            # between neighbours: the margin is that gap, at least SUPPORT_RADIUS voxels
-            h = self.grid.spacing
-            margin = data_crop_limit(anchors, h, floor=SUPPORT_RADIUS, spread=1.0) * h
+            # a fixed share of the domain, so that the crop does not depend on the resolution
+            margin = CROP_MARGIN * float(np.max(self.grid.upper - self.grid.origin))
+            margin = max(margin, SUPPORT_RADIUS * self.grid.spacing)
             vertices, faces = crop_to_data_hull(vertices, faces, anchors, margin=margin)
         rejected = ([] if self.fit_report is None
                     else rejected_summary(self.fit_report, self.scene))
@@ -419,6 +417,13 @@ class Reconstructor:
                         history=list(self.history), hits=hits, rejected=rejected)
         result.assess(self.scene)
         return result
+
+
+CROP_MARGIN = 3.0 / 64.0
+"""Margin of the crop of an open surface, as a share of the domain's longest side: three
+voxels at resolution 64. Wider keeps the back of a patch that wraps past 180 degrees (the
+wrap scene: 0.04 voxel from the truth at this margin, 0.8 with the gap between constraints as
+the margin); a margin in voxels would cut the octant's rim at resolution 256."""
 
 
 def reconstruct(scene: Scene | str | os.PathLike, *,
