@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from warpspec.errors import SceneError
+from warpspec.errors import InputError, SceneError
 from warpspec.evaluate import (
     CHAMFER_CONVENTION,
     Evaluation,
@@ -112,7 +112,7 @@ def test_hull_crop_keeps_inside_and_drops_outside():
     # Margin and height limits.
     assert hull_region(corners, margin=0.15).contains(outside[None])[0]
     assert not hull_region(corners, height=0.5).contains((inside + 0.7 * n)[None])[0]
-    with pytest.raises(SceneError, match="collinear"):
+    with pytest.raises(InputError, match="collinear"):
         hull_region([[0, 0, 0], [1, 1, 1], [2, 2, 2]])
 
 

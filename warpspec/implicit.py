@@ -26,8 +26,8 @@ import numpy as np
 import warp as wp
 
 from . import quadric as Q
+from .geometry import plane_frame
 from .grid import Grid
-from .initial import plane_frame
 from .kernels import implicit as K
 
 __all__ = ["FitReport", "ImplicitStart", "first_guess", "level_ladder", "ray_convergence"]

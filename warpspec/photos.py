@@ -39,11 +39,9 @@ from typing import Any
 import numpy as np
 
 from .errors import SceneError
+from .geometry import LIGHT_CODES
 
 __all__ = ["PhotoSet", "closed_sphere", "render_photos", "run_sfm"]
-
-_LIGHT_CODES = {"directional": 0, "point": 1, "camera": 2}
-
 
 @dataclass(frozen=True)
 class PhotoSet:
@@ -367,7 +365,7 @@ def render_photos(
             nrm[on_object] = surface.normal(p)
             normal = wp.array(nrm, dtype=wp.vec3, device=dev)
         rgb = launch_shade(mesh, c, direction, t, face, normal, object_faces=len(ofaces),
-                           light_type=_LIGHT_CODES[kind], light_vec=light_vec,
+                           light_type=LIGHT_CODES[kind], light_vec=light_vec,
                            light_ref=light_ref, shininess=shininess, specular=4.0,
                            object_albedo=(0.22, 0.2, 0.25), ambient=0.25,
                            texture_scale=extent / 40.0, seed=seed, spots=wspots,

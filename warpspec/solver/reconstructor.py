@@ -16,12 +16,12 @@ import warp as wp
 
 from .._runtime import init, resolve_device
 from ..errors import InputError, ReconstructionError
+from ..geometry import crop_to_data_hull
 from ..grid import Grid
 from ..implicit import rejected_summary
 from ..kernels.flow import launch_flow_step, launch_flow_step_band
 from ..kernels.measures import MEASURE_SLOTS
 from ..mesh import (
-    crop_to_data_hull,
     data_crop_limit,
     is_open,
     supported_components,
