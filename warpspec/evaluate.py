@@ -32,7 +32,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from .errors import SceneError
+from .errors import InputError
 from .geometry import HullRegion, hull_region
 
 __all__ = [
@@ -140,12 +140,12 @@ def closest_point(
         triangle (see :func:`closest_point_on_triangles`).
 
     Raises:
-        SceneError: If the mesh has no faces.
+        InputError: If the mesh has no faces.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(mesh.faces)
     if len(faces) == 0:
-        raise SceneError("mesh: has no faces, cannot measure distances to it")
+        raise InputError("mesh: has no faces, cannot measure distances to it")
     tri = np.asarray(mesh.vertices, dtype=np.float64)[faces]
     centroid = tri.mean(axis=1)
     radius = np.linalg.norm(tri - centroid[:, None, :], axis=2).max(axis=1)
@@ -414,12 +414,12 @@ def evaluate(
         The measures.
 
     Raises:
-        SceneError: If a mesh is empty, the region keeps no sample, or the normals do not match
+        InputError: If a mesh is empty, the region keeps no sample, or the normals do not match
             the points.
     """
     for label, m in (("mesh", mesh), ("truth", truth)):
         if len(m.faces) == 0:
-            raise SceneError(f"{label}: has no faces, nothing to evaluate")
+            raise InputError(f"{label}: has no faces, nothing to evaluate")
     if region is not None and not isinstance(region, HullRegion):
         region = hull_region(np.asarray(region, dtype=np.float64))
 
@@ -429,7 +429,7 @@ def evaluate(
         pm = pm[region.contains(pm)]
         pt = pt[region.contains(pt)]
         if len(pm) == 0 or len(pt) == 0:
-            raise SceneError(
+            raise InputError(
                 f"region: keeps {len(pm)} mesh and {len(pt)} truth samples; needs some of both"
             )
     _, accuracy, _, _ = closest_point(truth, pm)
@@ -444,7 +444,7 @@ def evaluate(
         else:
             tn = np.asarray(true_normals, dtype=np.float64).reshape(-1, 3)
             if tn.shape != sp.shape:
-                raise SceneError(
+                raise InputError(
                     f"true_normals: shape {tn.shape} does not match specular_points {sp.shape}"
                 )
         if len(sp):
@@ -483,10 +483,10 @@ def mesh_normals_at(
         Unit normals ``(N, 3)``.
 
     Raises:
-        SceneError: If ``mode`` is unknown or the mesh has no faces.
+        InputError: If ``mode`` is unknown or the mesh has no faces.
     """
     if mode not in ("face", "vertex"):
-        raise SceneError(f"mode: expected 'face' or 'vertex', got {mode!r}")
+        raise InputError(f"mode: expected 'face' or 'vertex', got {mode!r}")
     cp, _, face, _ = closest_point(mesh, points)
     if mode == "face":
         return np.asarray(mesh.face_normals, dtype=np.float64)[face]
@@ -568,7 +568,7 @@ def truth_region(
         margin: Grow the hull by this distance in world units.
 
     Raises:
-        SceneError: If the points span no 2D hull.
+        InputError: If the points span no 2D hull.
     """
     sp = np.asarray(specular_points, dtype=np.float64).reshape(-1, 3)
     sp = sp[np.all(np.isfinite(sp), axis=1)]
