@@ -419,7 +419,94 @@ class Plane(Surface):
         return _grid_mesh(grid, self)
 
 
-class QuadraticHeightField(Surface):
+class _HeightField(Surface):
+    """A surface ``z = height(x, y)`` over ``region``, facing ``+z``.
+
+    Subclasses give ``_terms`` (height, gradient and Hessian at plane points) and ``region``;
+    the closest point takes ``_NEWTON_STEPS`` Newton steps, each at most ``_NEWTON_DAMP`` long
+    when that is set.
+    """
+
+    region: tuple[float, float, float, float]
+    _NEWTON_STEPS = 60
+    _NEWTON_DAMP: float | None = None
+
+    @abstractmethod
+    def _terms(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Height ``(N,)``, gradient ``(N, 2)`` and Hessian at plane points ``(N, 2)``."""
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """Heights ``(N,)`` at plane points ``(N, 2)``."""
+        return self._terms(xy)[0]
+
+    def lift(self, xy: np.ndarray) -> np.ndarray:
+        """Surface points ``(N, 3)`` above plane points ``(N, 2)``."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([xy, self.height(xy)])
+
+    def corners(self) -> np.ndarray:
+        """The surface points above the four corners of ``region``, shape ``(4, 3)``."""
+        x0, x1, y0, y1 = self.region
+        return self.lift([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+
+    def implicit(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        x = _points(x)
+        return x[:, 2] - self.height(x[:, :2])
+
+    def normal(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
+        x = _points(x)
+        g = self._terms(x[:, :2])[1]
+        return _normalize(np.column_stack([-g, np.ones(len(x))]))
+
+    def closest_point(self, x: np.ndarray) -> np.ndarray:
+        """Closest points by Newton iterations on the height-field parameters.
+
+        Gauss-Newton where the Hessian is not positive definite. Exact for points within the
+        surface's smallest radius of curvature (where the closest point is unique), which
+        covers every use here.
+        """
+        x = _points(x)
+        u = x[:, :2].copy()
+        eye = np.eye(2)
+        for _ in range(self._NEWTON_STEPS):
+            f, g, H = self._terms(u)
+            res = f - x[:, 2]
+            grad = (u - x[:, :2]) + res[:, None] * g
+            hess = eye + g[:, :, None] * g[:, None, :] + res[:, None, None] * H
+            det = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
+            bad = (det <= 1e-12) | (hess[:, 0, 0] <= 0)
+            hess[bad] = eye + g[bad, :, None] * g[bad, None, :]
+            step = np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
+            if self._NEWTON_DAMP is not None:
+                size = np.linalg.norm(step, axis=1, keepdims=True)
+                step = step * np.minimum(1.0, self._NEWTON_DAMP / np.maximum(size, 1e-300))
+            u = u - step
+            if np.max(np.abs(step)) < 1e-15:
+                break
+        return self.lift(u)
+
+    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Local chart ``(u, v) -> (x0 + u, y0 + v, f(...))``: exactly on the surface."""
+        xy0 = np.asarray(x0, dtype=np.float64).reshape(3)[:2]
+
+        def point(uv: np.ndarray) -> np.ndarray:
+            return self.lift(xy0 + np.asarray(uv))[0]
+
+        return point
+
+    def mesh(self, *, resolution: int = 128) -> trimesh.Trimesh:
+        """Grid over ``region`` with ``resolution`` cells along its longer side."""
+        x0, x1, y0, y1 = self.region
+        step = max(x1 - x0, y1 - y0) / resolution
+        nx = max(int(math.ceil((x1 - x0) / step - 1e-9)), 1)
+        ny = max(int(math.ceil((y1 - y0) / step - 1e-9)), 1)
+        xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+        xy = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
+        grid = self.lift(xy.reshape(-1, 2)).reshape(nx + 1, ny + 1, 3)
+        return _grid_mesh(grid, self)
+
+
+class QuadraticHeightField(_HeightField):
     """An open surface ``z = z0 + g.(p - p0) + 1/2 (p - p0)^T H (p - p0)``, ``p = (x, y)``.
 
     The outward normal points up (``+z``): cameras look from above. The surface is defined
@@ -459,59 +546,13 @@ class QuadraticHeightField(Surface):
         w = np.asarray(xy, dtype=np.float64).reshape(-1, 2) - self.origin
         return self.z0 + w @ self.slope + 0.5 * _dot(w @ self.hessian, w)
 
+    def _terms(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.height(xy), self.gradient(xy), self.hessian
+
     def gradient(self, xy: np.ndarray) -> np.ndarray:
         """Gradient ``(N, 2)`` of the height at plane points ``(N, 2)``."""
         w = np.asarray(xy, dtype=np.float64).reshape(-1, 2) - self.origin
         return self.slope + w @ self.hessian
-
-    def lift(self, xy: np.ndarray) -> np.ndarray:
-        """Surface points ``(N, 3)`` above plane points ``(N, 2)``."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        return np.column_stack([xy, self.height(xy)])
-
-    def corners(self) -> np.ndarray:
-        """The surface points above the four corners of ``region``, shape ``(4, 3)``."""
-        x0, x1, y0, y1 = self.region
-        return self.lift([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-
-    def implicit(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
-        x = _points(x)
-        return x[:, 2] - self.height(x[:, :2])
-
-    def normal(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
-        x = _points(x)
-        g = self.gradient(x[:, :2])
-        return _normalize(np.column_stack([-g, np.ones(len(x))]))
-
-    def closest_point(self, x: np.ndarray) -> np.ndarray:
-        """Closest points by damped Newton iterations on the height-field parameters."""
-        x = _points(x)
-        u = x[:, :2].copy()
-        eye = np.eye(2)
-        for _ in range(60):
-            f = self.height(u)
-            g = self.gradient(u)
-            res = f - x[:, 2]
-            grad = (u - x[:, :2]) + res[:, None] * g
-            hess = eye + g[:, :, None] * g[:, None, :] + res[:, None, None] * self.hessian
-            # Fall back to Gauss-Newton where the Hessian is not positive definite.
-            det = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
-            bad = (det <= 1e-12) | (hess[:, 0, 0] <= 0)
-            hess[bad] = eye + g[bad, :, None] * g[bad, None, :]
-            step = np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
-            u = u - step
-            if np.max(np.abs(step)) < 1e-15:
-                break
-        return self.lift(u)
-
-    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Local chart ``(u, v) -> (x0 + u, y0 + v, f(...))``: exactly on the surface."""
-        xy0 = np.asarray(x0, dtype=np.float64).reshape(3)[:2]
-
-        def point(uv: np.ndarray) -> np.ndarray:
-            return self.lift(xy0 + np.asarray(uv))[0]
-
-        return point
 
     def intersect(  # noqa: D102
         self, origins: np.ndarray, directions: np.ndarray, *, t_min: float = 1e-9
@@ -524,18 +565,6 @@ class QuadraticHeightField(Surface):
         b = d[:, 2] - e @ self.slope - _dot(w, he)
         c = o[:, 2] - self.z0 - w @ self.slope - 0.5 * _dot(w @ self.hessian, w)
         return _first_root(a, b, c, t_min)
-
-    def mesh(self, *, resolution: int = 128) -> trimesh.Trimesh:
-        """Grid over ``region`` with ``resolution`` cells along its longer side."""
-        x0, x1, y0, y1 = self.region
-        step = max(x1 - x0, y1 - y0) / resolution
-        nx = max(int(math.ceil((x1 - x0) / step - 1e-9)), 1)
-        ny = max(int(math.ceil((y1 - y0) / step - 1e-9)), 1)
-        xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
-        xy = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
-        grid = self.lift(xy.reshape(-1, 2)).reshape(nx + 1, ny + 1, 3)
-        return _grid_mesh(grid, self)
-
 
 class Paraboloid(QuadraticHeightField):
     """Elliptic paraboloid ``z = apex_z + a (x - apex_x)^2 + b (y - apex_y)^2``.
@@ -1009,7 +1038,7 @@ class Revolution(Surface):
         return _orient(m, self)
 
 
-class FreeformHeightField(Surface):
+class FreeformHeightField(_HeightField):
     """An open surface ``z = z0 + waves + bumps - dome``, facing ``+z``.
 
     ``waves`` are rows ``(amplitude, kx, ky, phase)`` adding ``a sin(kx x + ky y + phase)``;
@@ -1027,6 +1056,8 @@ class FreeformHeightField(Surface):
     """
 
     closed = False
+    _NEWTON_STEPS = 100
+    _NEWTON_DAMP = 0.1  # the terms are not quadratic: long steps are cut to this
 
     def __init__(self, *, z0: float = 0.0, waves: Any = (), bumps: Any = (),
                  dome: Sequence[float] = (0.0, 0.0), region: Sequence[float]) -> None:
@@ -1067,64 +1098,6 @@ class FreeformHeightField(Surface):
                                         - np.eye(2) / (sig * sig))
         return h, g, H
 
-    def height(self, xy: np.ndarray) -> np.ndarray:
-        """Heights ``(N,)`` at plane points ``(N, 2)``."""
-        return self._terms(xy)[0]
-
-    def lift(self, xy: np.ndarray) -> np.ndarray:
-        """Surface points ``(N, 3)`` above plane points ``(N, 2)``."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        return np.column_stack([xy, self.height(xy)])
-
-    def corners(self) -> np.ndarray:
-        """The surface points above the four corners of ``region``, shape ``(4, 3)``."""
-        x0, x1, y0, y1 = self.region
-        return self.lift([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-
-    def implicit(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
-        x = _points(x)
-        return x[:, 2] - self.height(x[:, :2])
-
-    def normal(self, x: np.ndarray) -> np.ndarray:  # noqa: D102
-        x = _points(x)
-        g = self._terms(x[:, :2])[1]
-        return _normalize(np.column_stack([-g, np.ones(len(x))]))
-
-    def closest_point(self, x: np.ndarray) -> np.ndarray:
-        """Closest points by damped Newton iterations on the height-field parameters.
-
-        Exact for points within the surface's smallest radius of curvature (where the
-        closest point is unique), which covers every use here.
-        """
-        x = _points(x)
-        u = x[:, :2].copy()
-        eye = np.eye(2)
-        for _ in range(100):
-            f, g, H = self._terms(u)
-            res = f - x[:, 2]
-            grad = (u - x[:, :2]) + res[:, None] * g
-            hess = eye + g[:, :, None] * g[:, None, :] + res[:, None, None] * H
-            det = hess[:, 0, 0] * hess[:, 1, 1] - hess[:, 0, 1] * hess[:, 1, 0]
-            bad = (det <= 1e-12) | (hess[:, 0, 0] <= 0)
-            hess[bad] = eye + g[bad, :, None] * g[bad, None, :]
-            step = np.linalg.solve(hess, grad[:, :, None])[:, :, 0]
-            # Damp long steps: the terms are not quadratic.
-            size = np.linalg.norm(step, axis=1, keepdims=True)
-            step = step * np.minimum(1.0, 0.1 / np.maximum(size, 1e-300))
-            u = u - step
-            if np.max(np.abs(step)) < 1e-15:
-                break
-        return self.lift(u)
-
-    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Local chart ``(u, v) -> (x0 + u, y0 + v, f(...))``: exactly on the surface."""
-        xy0 = np.asarray(x0, dtype=np.float64).reshape(3)[:2]
-
-        def point(uv: np.ndarray) -> np.ndarray:
-            return self.lift(xy0 + np.asarray(uv))[0]
-
-        return point
-
     def intersect(  # noqa: D102
         self, origins: np.ndarray, directions: np.ndarray, *, t_min: float = 1e-9
     ) -> np.ndarray:
@@ -1143,14 +1116,3 @@ class FreeformHeightField(Surface):
         t0 = np.maximum(t0, t_min)
         norm = np.linalg.norm(d, axis=1).max(initial=1.0)
         return _march(self.implicit, o, d, t0, t1, step=0.002 * max(px, py) / norm)
-
-    def mesh(self, *, resolution: int = 128) -> trimesh.Trimesh:
-        """Grid over ``region`` with ``resolution`` cells along its longer side."""
-        x0, x1, y0, y1 = self.region
-        step = max(x1 - x0, y1 - y0) / resolution
-        nx = max(int(math.ceil((x1 - x0) / step - 1e-9)), 1)
-        ny = max(int(math.ceil((y1 - y0) / step - 1e-9)), 1)
-        xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
-        xy = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
-        grid = self.lift(xy.reshape(-1, 2)).reshape(nx + 1, ny + 1, 3)
-        return _grid_mesh(grid, self)
