@@ -29,6 +29,7 @@ from .geometry import (
     LIGHT_KINDS,
     LIGHT_POINT,
     best_fit_plane,
+    camera_centre,
 )
 
 __all__ = [
@@ -1026,7 +1027,7 @@ def _camera_centre(P: np.ndarray, field: str) -> np.ndarray:
                 "expected a finite camera, got a singular left 3x3 block "
                 f"(condition number {cond:.3g}, at most {_MAX_CAMERA_COND:.0e} accepted)",
             )
-        centre = -np.linalg.solve(M, P[:, 3])
+        centre = camera_centre(P)
     if not np.all(np.isfinite(centre)):
         raise _error(field, "the camera centre -M^-1 p4 is not finite (badly scaled matrix)")
     return centre
