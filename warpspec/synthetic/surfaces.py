@@ -49,12 +49,18 @@ def _first_root(a: np.ndarray, b: np.ndarray, c: np.ndarray, t_min: float) -> np
     return out
 
 
-def _grid_mesh(grid: np.ndarray, surface: Surface) -> trimesh.Trimesh:
-    """Triangulate an ``(nu, nv, 3)`` grid of surface points, facing along ``surface.normal``."""
+def _grid_mesh(grid: np.ndarray, surface: Surface, *, wrap: bool = False) -> trimesh.Trimesh:
+    """Triangulate an ``(nu, nv, 3)`` grid of surface points, facing along ``surface.normal``.
+
+    With ``wrap`` the last row joins the first (a seam closed around an axis).
+    """
     nu, nv = grid.shape[:2]
     idx = np.arange(nu * nv).reshape(nu, nv)
-    a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
-    c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    nxt = np.roll(idx, -1, axis=0)
+    if not wrap:
+        idx, nxt = idx[:-1], nxt[:-1]
+    a, b = idx[:, :-1].ravel(), nxt[:, :-1].ravel()
+    c, d = nxt[:, 1:].ravel(), idx[:, 1:].ravel()
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     mesh = trimesh.Trimesh(vertices=grid.reshape(-1, 3), faces=faces, process=False)
     return _orient(mesh, surface)
@@ -360,15 +366,7 @@ class Cylinder(Surface):
         grid = self.at(ang[:, None], hgt[None, :])
         if not full:
             return _grid_mesh(grid, self)
-        # Close the seam: wrap the angle index.
-        nu, nv = len(ang), len(hgt)
-        idx = np.arange(nu * nv).reshape(nu, nv)
-        nxt = np.roll(idx, -1, axis=0)
-        a, b = idx[:, :-1].ravel(), nxt[:, :-1].ravel()
-        c, d = nxt[:, 1:].ravel(), idx[:, 1:].ravel()
-        faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-        m = trimesh.Trimesh(vertices=grid.reshape(-1, 3), faces=faces, process=False)
-        return _orient(m, self)
+        return _grid_mesh(grid, self, wrap=True)  # the seam closed around the axis
 
 
 class Plane(Surface):
@@ -1029,13 +1027,7 @@ class Revolution(Surface):
         ang = np.linspace(0, 2 * math.pi, sections, endpoint=False)
         hgt = np.linspace(lo, hi, rings + 1)
         grid = self.at(ang[:, None], hgt[None, :])
-        idx = np.arange(sections * (rings + 1)).reshape(sections, rings + 1)
-        nxt = np.roll(idx, -1, axis=0)
-        a, b = idx[:, :-1].ravel(), nxt[:, :-1].ravel()
-        c, d = nxt[:, 1:].ravel(), idx[:, 1:].ravel()
-        faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-        m = trimesh.Trimesh(vertices=grid.reshape(-1, 3), faces=faces, process=False)
-        return _orient(m, self)
+        return _grid_mesh(grid, self, wrap=True)
 
 
 class FreeformHeightField(_HeightField):
