@@ -76,15 +76,15 @@ def test_tracked_points_mark_texture():
 
 
 def test_bad_images_and_options_are_named():
-    with pytest.raises(ws.SceneError, match="^image: expected a 2-D grey"):
+    with pytest.raises(ws.InputError, match="^image: expected a 2-D grey"):
         detect_highlights(np.zeros((4, 4, 4, 4)))
-    with pytest.raises(ws.SceneError, match="^image: unsupported pixel type int32"):
+    with pytest.raises(ws.InputError, match="^image: unsupported pixel type int32"):
         detect_highlights(np.zeros((4, 4), dtype=np.int32))
-    with pytest.raises(ws.SceneError, match="^image: the image has non-finite"):
+    with pytest.raises(ws.InputError, match="^image: the image has non-finite"):
         detect_highlights(np.full((4, 4), np.nan))
-    with pytest.raises(ws.SceneError, match="^min_peak:"):
+    with pytest.raises(ws.InputError, match="^min_peak:"):
         detect_highlights(np.zeros((4, 4)), min_peak=1.5)
-    with pytest.raises(ws.SceneError, match="^radius:"):
+    with pytest.raises(ws.InputError, match="^radius:"):
         detect_highlights(np.zeros((4, 4)), radius=0)
 
 
@@ -100,11 +100,11 @@ def test_files_and_folders(tmp_path):
     assert [name for name, _ in found] == ["b.png", "sub/a.png"]
     rows = detect_highlights(read_image(found[1][1]))
     assert nearest(rows, CENTRES[:1])[0] < 0.1
-    with pytest.raises(ws.SceneError, match="no such file or folder"):
+    with pytest.raises(ws.InputError, match="no such file or folder"):
         find_images([tmp_path / "nope"])
     bad = tmp_path / "bad.png"
     bad.write_text("not a png")
-    with pytest.raises(ws.SceneError, match=r"bad.png: cannot read it as an image"):
+    with pytest.raises(ws.InputError, match=r"bad.png: cannot read it as an image"):
         read_image(bad)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from warpspec.errors import SceneError
+from warpspec.errors import InputError
 from warpspec.evaluate import (
     CHAMFER_CONVENTION,
     Evaluation,
@@ -112,7 +112,7 @@ def test_hull_crop_keeps_inside_and_drops_outside():
     # Margin and height limits.
     assert hull_region(corners, margin=0.15).contains(outside[None])[0]
     assert not hull_region(corners, height=0.5).contains((inside + 0.7 * n)[None])[0]
-    with pytest.raises(SceneError, match="collinear"):
+    with pytest.raises(InputError, match="collinear"):
         hull_region([[0, 0, 0], [1, 1, 1], [2, 2, 2]])
 
 
@@ -165,9 +165,9 @@ def test_octant_truth_against_offset_sphere_cropped_to_constraints():
 def test_bad_input_raises():
     empty = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=int))
     sphere = trimesh.creation.icosphere(subdivisions=1)
-    with pytest.raises(SceneError):
+    with pytest.raises(InputError):
         evaluate(empty, sphere)
-    with pytest.raises(SceneError, match="region"):
+    with pytest.raises(InputError, match="region"):
         evaluate(sphere, sphere, region=[[5, 5, 5], [6, 5, 5], [5, 6, 5]])
 
 
@@ -205,7 +205,7 @@ def test_vertex_normals_smooth_the_facets():
     err_face = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", face, q), -1, 1)))
     err_vertex = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vertex, q), -1, 1)))
     assert err_vertex.mean() < 0.5 * err_face.mean()
-    with pytest.raises(SceneError, match="mode"):
+    with pytest.raises(InputError, match="mode"):
         mesh_normals_at(sphere, q, mode="phong")
 
 

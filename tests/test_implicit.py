@@ -6,10 +6,11 @@ import warp as wp
 
 import warpspec as ws
 from warpspec import quadric as Q
+from warpspec.geometry import crop_to_data_hull
 from warpspec.grid import Grid
 from warpspec.implicit import first_guess, level_ladder, ray_convergence
 from warpspec.kernels import implicit as K
-from warpspec.mesh import crop_to_data_hull, is_open, supported_components, triangulate
+from warpspec.mesh import is_open, supported_components, triangulate
 from warpspec.solver import initial_plane
 from warpspec.synthetic import make_scene
 

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 import warp as wp
 
+from warpspec.geometry import plane_frame
 from warpspec.grid import Grid
-from warpspec.initial import HeightFit, monomials, plane_frame
+from warpspec.initial import HeightFit, monomials
 from warpspec.kernels.band import launch_build_band
 from warpspec.kernels.constraints import launch_claim_normals, launch_gaussian
 from warpspec.kernels.flow import (

@@ -112,9 +112,9 @@ def test_cli_detect_then_import_keeps_the_objects_points(bench, capsys, tmp_path
 
 def test_bench_options_are_checked(tmp_path):
     synthetic = make_scene("octant")
-    with pytest.raises(ws.SceneError, match="^scale: 0.33 x 640x480 is not a whole number"):
+    with pytest.raises(ws.InputError, match="^scale: 0.33 x 640x480 is not a whole number"):
         render_photos(synthetic, tmp_path, scale=0.33)
-    with pytest.raises(ws.SceneError, match="^saturated_spots: 5 is more than spots=2"):
+    with pytest.raises(ws.InputError, match="^saturated_spots: 5 is more than spots=2"):
         render_photos(synthetic, tmp_path, spots=2, saturated_spots=5)
 
 

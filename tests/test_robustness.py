@@ -132,7 +132,7 @@ def test_a_bug_is_reported_in_one_line_without_a_traceback(capsys, folder, monke
     def broken(*args, **kwargs):
         raise ZeroDivisionError("float division by zero")
 
-    monkeypatch.setattr("warpspec.mesh.crop_to_hull", broken)
+    monkeypatch.setattr("warpspec.geometry.crop_to_hull", broken)
     monkeypatch.delenv("WARPSPEC_DEBUG", raising=False)
     status = main(["reconstruct", str(folder / "octant.json"), "-o", str(folder / "x.ply"),
                    *FAST, "--crop", "hull"])

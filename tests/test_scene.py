@@ -662,3 +662,27 @@ def test_check_reports_an_underivable_domain_instead_of_raising():
         assert len(Scene.from_dict(data).check()) == 1
     with pytest.raises(SceneError, match=r"^bounds: max must exceed min"):
         Scene.from_dict(data).check(bounds=([0, 0, 0], [0, 1, 1]))
+
+
+@pytest.mark.parametrize(("offset", "collinear"), [(1e-7, True), (1e-5, False)])
+def test_check_and_the_start_share_the_collinear_tolerance(offset, collinear):
+    # Three points on the x axis, the middle one lifted by ``offset`` along z: the second
+    # singular value over the first is about 0.47 * offset, on either side of COLLINEAR_TOL.
+    from warpspec.geometry import COLLINEAR_TOL
+    from warpspec.grid import Grid
+    from warpspec.solver import initial_plane
+
+    assert (0.47 * offset <= COLLINEAR_TOL) == collinear
+    data = base_dict()
+    data["points"] = [[-1.0, 0.0, 0.0], [0.0, 0.0, offset], [1.0, 0.0, 0.0]]
+    scene = Scene.from_dict(data)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        messages = scene.check()
+    assert any("collinear" in m for m in messages) == collinear
+    assert len(caught) == len(messages)
+    grid = Grid(origin=np.full(3, -1.0), spacing=0.05, shape=(41, 41, 41))
+    _, normal = initial_plane(scene, grid)
+    # A plane through the points has the normal +-y; the fallback takes the constraint normals.
+    fitted = abs(abs(float(normal[1])) - 1.0) < 1e-9
+    assert fitted == (not collinear)

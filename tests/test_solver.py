@@ -8,7 +8,7 @@ import pytest
 import warp as wp
 
 import warpspec as ws
-from warpspec.evaluate import hull_region
+from warpspec.geometry import hull_region
 from warpspec.mesh import sample_trilinear
 
 OCTANT = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "octant.json"

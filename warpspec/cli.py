@@ -380,7 +380,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     mesh = result  # its vertices and faces; result.mesh (trimesh) only where one is needed
     support = result.support
     if args.crop == "hull":
-        from .mesh import crop_to_hull
+        from .geometry import crop_to_hull
 
         try:
             mesh = crop_to_hull(result.mesh, result.constraint_anchors(scene))

@@ -18,7 +18,7 @@ import numpy as np
 
 from ._atomic import StagedOutputs, atomic_write, check_paths, check_size
 from ._cli_common import finite, input_file, integer, output_path
-from .errors import InputError, SceneError
+from .errors import InputError
 
 __all__ = ["EVALUATE_DEFINITIONS", "add_parsers"]
 
@@ -101,38 +101,38 @@ def _load_truth_json(text: str, flag: str) -> dict:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError,
             ValueError) as exc:
         reason = " ".join(str(exc).split())[:120]
-        raise SceneError(f"{flag}: {text!r} is not readable JSON ({reason})") from None
+        raise InputError(f"{flag}: {text!r} is not readable JSON ({reason})") from None
     if not isinstance(data, dict):
-        raise SceneError(f"{flag}: {text!r} must hold a JSON object")
+        raise InputError(f"{flag}: {text!r} must hold a JSON object")
     out = {}
     for key, required in (("truth_points", True), ("truth_normals", True), ("points", False),
                           ("outliers", False)):
         if key not in data:
             if required:
-                raise SceneError(f"{flag}: {text!r} has no field {key!r} (write it with "
+                raise InputError(f"{flag}: {text!r} has no field {key!r} (write it with "
                                  "'warpspec synth --truth-json')")
             continue
         try:
             arr = np.asarray(data[key], dtype=np.float64)
         except (TypeError, ValueError):
-            raise SceneError(f"{flag}: field {key!r} of {text!r} is not numeric") from None
+            raise InputError(f"{flag}: field {key!r} of {text!r} is not numeric") from None
         if key == "outliers":
             flat = arr.reshape(-1)
             if not np.all(np.isfinite(flat)) or np.any(flat != np.round(flat)):
-                raise SceneError(f"{flag}: field 'outliers' of {text!r} must hold integer "
+                raise InputError(f"{flag}: field 'outliers' of {text!r} must hold integer "
                                  "indices")
             out[key] = flat.astype(np.int64)
             continue
         if arr.size and (arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr))):
-            raise SceneError(f"{flag}: field {key!r} of {text!r} must be finite (N, 3) rows")
+            raise InputError(f"{flag}: field {key!r} of {text!r} must be finite (N, 3) rows")
         out[key] = arr.reshape(-1, 3)
     if out["truth_points"].shape != out["truth_normals"].shape:
-        raise SceneError(f"{flag}: 'truth_points' and 'truth_normals' of {text!r} differ in "
+        raise InputError(f"{flag}: 'truth_points' and 'truth_normals' of {text!r} differ in "
                          "length")
     n = len(out["truth_points"])
     outliers = out.get("outliers")
     if outliers is not None and len(outliers) and (outliers.min() < 0 or outliers.max() >= n):
-        raise SceneError(f"{flag}: field 'outliers' of {text!r} holds indices out of range "
+        raise InputError(f"{flag}: field 'outliers' of {text!r} holds indices out of range "
                          f"(0 to {n - 1}, found {outliers.min()} to {outliers.max()})")
     return out
 
@@ -146,10 +146,10 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from .synthetic import make_scene, scene_names
 
     if args.name not in scene_names():
-        raise SceneError(f"NAME: unknown scene {args.name!r}; expected one of "
+        raise InputError(f"NAME: unknown scene {args.name!r}; expected one of "
                          f"{', '.join(scene_names())}")
     if args.output is None and args.photos is None:
-        raise SceneError("--output: required (the scene file to write, .json) unless --photos "
+        raise InputError("--output: required (the scene file to write, .json) unless --photos "
                          "DIR is given")
     out = output_path(args.output, (".json",), "--output") if args.output else None
     photos = _photos_folder(args.photos) if args.photos else None
@@ -157,25 +157,25 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     truth_json = (output_path(args.truth_json, (".json",), "--truth-json")
                   if args.truth_json else None)
     if args.noise < 0:
-        raise SceneError(f"--noise: must be a non-negative number of pixels, got {args.noise:g}")
+        raise InputError(f"--noise: must be a non-negative number of pixels, got {args.noise:g}")
     if not 0 <= args.outliers <= 1:
-        raise SceneError(f"--outliers: must be a fraction in [0, 1], got {args.outliers:g}")
+        raise InputError(f"--outliers: must be a fraction in [0, 1], got {args.outliers:g}")
     if args.seed < 0:
-        raise SceneError(f"--seed: must be a non-negative integer, got {args.seed}")
+        raise InputError(f"--seed: must be a non-negative integer, got {args.seed}")
     check_paths({"--output": out, "--truth": truth, "--truth-json": truth_json})
 
     options = {}
     if args.highlights is not None:
         if args.name != "freeform":
-            raise SceneError(f"--highlights: only the 'freeform' scene takes it, not "
+            raise InputError(f"--highlights: only the 'freeform' scene takes it, not "
                              f"{args.name!r}")
         options["highlights"] = args.highlights
     try:
         synthetic = make_scene(args.name, noise=args.noise, outliers=args.outliers,
                                seed=args.seed, **options)
-    except SceneError as exc:
+    except InputError as exc:
         if str(exc).startswith("highlights:"):
-            raise SceneError(f"--{exc}") from None
+            raise InputError(f"--{exc}") from None
         raise
     written = []
     # All or nothing: a scene without its truth is worse than no scene.
@@ -224,16 +224,16 @@ def _photos_folder(text: str) -> Path:
     """The folder for ``--photos``: new, or empty, or one it wrote before (images/, sparse/)."""
     p = Path(text)
     if p.exists() and not p.is_dir():
-        raise SceneError(f"--photos: {text!r} is a file, expected a folder")
+        raise InputError(f"--photos: {text!r} is a file, expected a folder")
     if p.is_dir():
         extra = sorted(x.name for x in p.iterdir()
                        if x.name not in ("images", "sparse", "highlights_true.csv", "truth.ply",
                                          "scene_true.json"))
         if extra:
-            raise SceneError(f"--photos: {text!r} holds other files ({', '.join(extra[:3])}); "
+            raise InputError(f"--photos: {text!r} holds other files ({', '.join(extra[:3])}); "
                              "give a new or empty folder")
     elif not p.parent.is_dir():
-        raise SceneError(f"--photos: the folder {str(p.parent)!r} does not exist")
+        raise InputError(f"--photos: the folder {str(p.parent)!r} does not exist")
     return p
 
 
@@ -284,13 +284,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise InputError(f"--seed: must be a non-negative integer, got {args.seed}")
     if args.spacing is not None and args.spacing <= 0:
-        raise SceneError(f"--spacing: must be a positive length, got {args.spacing:g}")
+        raise InputError(f"--spacing: must be a positive length, got {args.spacing:g}")
     if args.resolution is not None and args.resolution < 2:
-        raise SceneError(f"--resolution: must be at least 2 cells, got {args.resolution}")
+        raise InputError(f"--resolution: must be at least 2 cells, got {args.resolution}")
     if args.resolution is not None and args.spacing is not None:
-        raise SceneError("--resolution: give either --resolution (with --scene) or --spacing")
+        raise InputError("--resolution: give either --resolution (with --scene) or --spacing")
     if args.resolution is not None and args.scene is None:
-        raise SceneError("--resolution: needs --scene (h is the longest side of the scene's "
+        raise InputError("--resolution: needs --scene (h is the longest side of the scene's "
                          "domain divided by N); without a scene give --spacing")
 
     mesh = _load_mesh(args.mesh, "MESH")
@@ -322,15 +322,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if not args.no_crop and specular is not None:
         try:
             region = truth_region(specular, constraint_points)
-        except SceneError as exc:
-            raise SceneError(f"--scene: cannot crop to the constraints ({exc}); use --no-crop"
+        except InputError as exc:
+            raise InputError(f"--scene: cannot crop to the constraints ({exc}); use --no-crop"
                              ) from None
     try:
         result = evaluate(mesh, truth, spacing=spacing, region=region,
                           specular_points=specular, true_normals=normals,
                           samples=args.samples, seed=args.seed)
-    except SceneError as exc:
-        raise SceneError(f"MESH: {exc}") from None
+    except InputError as exc:
+        raise InputError(f"MESH: {exc}") from None
 
     print(f"# {args.mesh} against {args.truth}")
     if spacing:

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import InputError
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -57,10 +57,10 @@ def _grey(image: np.ndarray, field: str = "image") -> np.ndarray:
         else:
             a = a[..., :3]
     elif a.ndim != 2:
-        raise SceneError(f"{field}: expected a 2-D grey or (H, W, 3|4) colour image, got shape "
+        raise InputError(f"{field}: expected a 2-D grey or (H, W, 3|4) colour image, got shape "
                          f"{a.shape}")
     if a.size == 0:
-        raise SceneError(f"{field}: the image is empty")
+        raise InputError(f"{field}: the image is empty")
     if a.dtype == np.uint8:
         g = a.astype(np.float64) / 255.0
     elif a.dtype == np.uint16:
@@ -68,9 +68,9 @@ def _grey(image: np.ndarray, field: str = "image") -> np.ndarray:
     elif np.issubdtype(a.dtype, np.floating):
         g = a.astype(np.float64)
         if not np.all(np.isfinite(g)):
-            raise SceneError(f"{field}: the image has non-finite values")
+            raise InputError(f"{field}: the image has non-finite values")
     else:
-        raise SceneError(f"{field}: unsupported pixel type {a.dtype}; expected 8-bit, 16-bit "
+        raise InputError(f"{field}: unsupported pixel type {a.dtype}; expected 8-bit, 16-bit "
                          "or float")
     if g.ndim == 3:
         g = g @ _LUMA
@@ -81,17 +81,17 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     """Read a PNG/JPEG/TIFF photograph (scikit-image's io) as it is stored.
 
     Raises:
-        SceneError: If the file is missing or not an image, naming the file.
+        InputError: If the file is missing or not an image, naming the file.
     """
     from skimage import io as skio
 
     p = Path(path)
     if not p.is_file():
-        raise SceneError(f"{p}: no such image file")
+        raise InputError(f"{p}: no such image file")
     try:
         image = skio.imread(p)
     except Exception as exc:  # imageio raises many types for unreadable files
-        raise SceneError(f"{p}: cannot read it as an image ({' '.join(str(exc).split())[:120]})"
+        raise InputError(f"{p}: cannot read it as an image ({' '.join(str(exc).split())[:120]})"
                          ) from None
     if image.ndim == 3 and image.shape[0] in (3, 4) and image.shape[2] not in (1, 2, 3, 4):
         image = np.moveaxis(image, 0, -1)
@@ -106,7 +106,7 @@ def find_images(inputs: Sequence[str | os.PathLike]) -> list[tuple[str, Path]]:
     the images folder); a file is named by its base name.
 
     Raises:
-        SceneError: If an input does not exist, or a folder holds no images.
+        InputError: If an input does not exist, or a folder holds no images.
     """
     found: list[tuple[str, Path]] = []
     for item in inputs:
@@ -115,12 +115,12 @@ def find_images(inputs: Sequence[str | os.PathLike]) -> list[tuple[str, Path]]:
             files = sorted(f for f in p.rglob("*") if f.is_file()
                            and f.suffix.lower() in IMAGE_SUFFIXES)
             if not files:
-                raise SceneError(f"{p}: no images here (looked for {', '.join(IMAGE_SUFFIXES)})")
+                raise InputError(f"{p}: no images here (looked for {', '.join(IMAGE_SUFFIXES)})")
             found += [(f.relative_to(p).as_posix(), f) for f in files]
         elif p.is_file():
             found.append((p.name, p))
         else:
-            raise SceneError(f"{p}: no such file or folder")
+            raise InputError(f"{p}: no such file or folder")
     return found
 
 
@@ -187,7 +187,7 @@ def detect_highlights(
         Sorted by decreasing score.
 
     Raises:
-        SceneError: If the image or an option is invalid (the message names it).
+        InputError: If the image or an option is invalid (the message names it).
     """
     from scipy import ndimage
     from skimage.filters import gaussian
@@ -199,14 +199,14 @@ def detect_highlights(
                                    ("min_contrast", min_contrast, 0.0, 1.0)):
         if not (isinstance(value, int | float) and math.isfinite(value)
                 and low < value <= high):
-            raise SceneError(f"{name}: expected a number in ({low:g}, {high:g}], got {value!r}")
+            raise InputError(f"{name}: expected a number in ({low:g}, {high:g}], got {value!r}")
     if radius is None:
         radius = max(4.0, 0.02 * min(grey.shape))
     if not (isinstance(radius, int | float) and math.isfinite(radius) and radius >= 1):
-        raise SceneError(f"radius: expected a number of pixels >= 1, got {radius!r}")
+        raise InputError(f"radius: expected a number of pixels >= 1, got {radius!r}")
     if not (isinstance(exclude_radius, int | float) and math.isfinite(exclude_radius)
             and exclude_radius >= 0):
-        raise SceneError(f"exclude_radius: expected a number of pixels >= 0, got "
+        raise InputError(f"exclude_radius: expected a number of pixels >= 0, got "
                          f"{exclude_radius!r}")
     footprint = disk(int(math.ceil(radius)))
     smooth = gaussian(grey, sigma=0.7, preserve_range=True)

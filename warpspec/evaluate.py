@@ -32,7 +32,8 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from .errors import SceneError
+from .errors import InputError
+from .geometry import HullRegion, hull_region
 
 __all__ = [
     "CHAMFER_CONVENTION",
@@ -139,12 +140,12 @@ def closest_point(
         triangle (see :func:`closest_point_on_triangles`).
 
     Raises:
-        SceneError: If the mesh has no faces.
+        InputError: If the mesh has no faces.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(mesh.faces)
     if len(faces) == 0:
-        raise SceneError("mesh: has no faces, cannot measure distances to it")
+        raise InputError("mesh: has no faces, cannot measure distances to it")
     tri = np.asarray(mesh.vertices, dtype=np.float64)[faces]
     centroid = tri.mean(axis=1)
     radius = np.linalg.norm(tri - centroid[:, None, :], axis=2).max(axis=1)
@@ -197,110 +198,6 @@ def closest_point(
             pending = pending[~done]
             k = min(4 * k, nf)
     return closest, distance, face, feature
-
-
-@dataclass(frozen=True)
-class HullRegion:
-    """The region covered by a set of constraint points, seen along their best-fit plane.
-
-    A point is inside when its projection onto the plane falls inside the 2D convex hull of
-    the projected constraint points, grown by ``margin``.
-
-    Attributes:
-        centre: Centroid of the constraint points, shape ``(3,)``.
-        axes: Two orthonormal in-plane axes, shape ``(2, 3)``.
-        normal: Unit normal of the best-fit plane, shape ``(3,)``.
-        hull: Vertices of the 2D convex hull in plane coordinates, counter-clockwise, ``(K, 2)``.
-        margin: Distance in world units by which the hull is grown (each edge moved out).
-        height: When set, points farther than this from the plane are outside (useful when a
-            closed mesh would put its far side in the hull's shadow).
-    """
-
-    centre: np.ndarray
-    axes: np.ndarray
-    normal: np.ndarray
-    hull: np.ndarray
-    margin: float = 0.0
-    height: float | None = None
-
-    def project(self, points: np.ndarray) -> np.ndarray:
-        """Plane coordinates ``(N, 2)`` of world points ``(N, 3)``."""
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return (points - self.centre) @ self.axes.T
-
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        """Boolean mask ``(N,)``: whether each world point projects inside the region."""
-        uv = self.project(points)
-        inside = np.ones(len(uv), dtype=bool)
-        k = len(self.hull)
-        scale = max(float(np.abs(self.hull).max()), 1e-300)
-        for i in range(k):
-            p, q = self.hull[i], self.hull[(i + 1) % k]
-            edge = q - p
-            length = float(np.hypot(*edge))
-            # Signed distance to the edge's line, positive on the inner (left) side.
-            s = (edge[0] * (uv[:, 1] - p[1]) - edge[1] * (uv[:, 0] - p[0])) / length
-            inside &= s >= -self.margin - 1e-12 * scale
-        if self.height is not None:
-            off = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.centre) @ self.normal
-            inside &= np.abs(off) <= self.height
-        return inside
-
-
-def _convex_hull_2d(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull of 2D points (Andrew's monotone chain)."""
-    pts = sorted(set(map(tuple, np.asarray(points, dtype=np.float64))))
-
-    def cross(o: tuple, a: tuple, b: tuple) -> float:
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-    lower: list[tuple] = []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    upper: list[tuple] = []
-    for p in reversed(pts):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    return np.array(lower[:-1] + upper[:-1], dtype=np.float64).reshape(-1, 2)
-
-
-def hull_region(
-    points: np.ndarray, *, margin: float = 0.0, height: float | None = None
-) -> HullRegion:
-    """The region covered by constraint points: their 2D convex hull on their best-fit plane.
-
-    This is the crop the paper uses to show results (the convex hull of the ray intersections
-    and the point constraints).
-
-    Args:
-        points: Constraint points (specular points and point constraints), shape ``(N, 3)``.
-        margin: Grow the hull by this distance in world units (0 keeps exactly the hull).
-        height: Also drop points farther than this from the best-fit plane (default: keep
-            every distance).
-
-    Returns:
-        The region; use :meth:`HullRegion.contains` on points.
-
-    Raises:
-        SceneError: If there are fewer than three points or they are collinear.
-    """
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) < 3 or not np.all(np.isfinite(points)):
-        raise SceneError(
-            f"region: needs at least 3 finite points to span a hull, got {len(points)}"
-        )
-    centre = points.mean(axis=0)
-    _, s, vt = np.linalg.svd(points - centre, full_matrices=False)
-    if s[1] <= 1e-12 * max(s[0], 1e-300):
-        raise SceneError("region: the points are collinear, they span no 2D hull")
-    axes = vt[:2].copy()
-    normal = np.cross(axes[0], axes[1])
-    hull = _convex_hull_2d((points - centre) @ axes.T)
-    return HullRegion(centre=centre, axes=axes, normal=normal, hull=hull, margin=float(margin),
-                      height=None if height is None else float(height))
 
 
 def crop_mesh(mesh: trimesh.Trimesh, region: HullRegion) -> trimesh.Trimesh:
@@ -517,12 +414,12 @@ def evaluate(
         The measures.
 
     Raises:
-        SceneError: If a mesh is empty, the region keeps no sample, or the normals do not match
+        InputError: If a mesh is empty, the region keeps no sample, or the normals do not match
             the points.
     """
     for label, m in (("mesh", mesh), ("truth", truth)):
         if len(m.faces) == 0:
-            raise SceneError(f"{label}: has no faces, nothing to evaluate")
+            raise InputError(f"{label}: has no faces, nothing to evaluate")
     if region is not None and not isinstance(region, HullRegion):
         region = hull_region(np.asarray(region, dtype=np.float64))
 
@@ -532,7 +429,7 @@ def evaluate(
         pm = pm[region.contains(pm)]
         pt = pt[region.contains(pt)]
         if len(pm) == 0 or len(pt) == 0:
-            raise SceneError(
+            raise InputError(
                 f"region: keeps {len(pm)} mesh and {len(pt)} truth samples; needs some of both"
             )
     _, accuracy, _, _ = closest_point(truth, pm)
@@ -547,7 +444,7 @@ def evaluate(
         else:
             tn = np.asarray(true_normals, dtype=np.float64).reshape(-1, 3)
             if tn.shape != sp.shape:
-                raise SceneError(
+                raise InputError(
                     f"true_normals: shape {tn.shape} does not match specular_points {sp.shape}"
                 )
         if len(sp):
@@ -586,10 +483,10 @@ def mesh_normals_at(
         Unit normals ``(N, 3)``.
 
     Raises:
-        SceneError: If ``mode`` is unknown or the mesh has no faces.
+        InputError: If ``mode`` is unknown or the mesh has no faces.
     """
     if mode not in ("face", "vertex"):
-        raise SceneError(f"mode: expected 'face' or 'vertex', got {mode!r}")
+        raise InputError(f"mode: expected 'face' or 'vertex', got {mode!r}")
     cp, _, face, _ = closest_point(mesh, points)
     if mode == "face":
         return np.asarray(mesh.face_normals, dtype=np.float64)[face]
@@ -671,7 +568,7 @@ def truth_region(
         margin: Grow the hull by this distance in world units.
 
     Raises:
-        SceneError: If the points span no 2D hull.
+        InputError: If the points span no 2D hull.
     """
     sp = np.asarray(specular_points, dtype=np.float64).reshape(-1, 3)
     sp = sp[np.all(np.isfinite(sp), axis=1)]

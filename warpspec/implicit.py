@@ -26,12 +26,14 @@ import numpy as np
 import warp as wp
 
 from . import quadric as Q
+from .geometry import plane_frame
 from .grid import Grid
-from .initial import plane_frame
 from .kernels import implicit as K
 
 __all__ = ["FitReport", "ImplicitStart", "first_guess", "level_ladder", "ray_convergence"]
 
+MIN_CONSTRAINTS = 3
+"""Fewest rays entering the domain plus points below which nothing is fitted."""
 COARSEST = 16
 """Cells along the longest side of the coarsest level of the ladder."""
 QUADRIC_DEG = 3.0
@@ -328,7 +330,14 @@ class ImplicitStart:
         self.quadric = quad
         rounds, cg = [], []
         ladder: list[int] = []
-        if self._quadric_suffices():
+        _, _, enters = quad.intersect(*self.scene.rays(), lo, hi)
+        if int(enters.sum()) + self.scene.num_points < MIN_CONSTRAINTS:
+            # too little data in the domain to fit anything: the guess stands, and the
+            # verdict will say that the data does not support it
+            self.quadric = initial
+            self._quadric_field(self.grid, out)
+            self.weights = enters.astype(float)
+        elif self._quadric_suffices():
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
         else:

@@ -1,21 +1,12 @@
-"""Starting surfaces: the paper's plane, and a height field fitted to points and normals."""
+"""A height field fitted to points and normals (the height start)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["HeightFit", "fit_height_field", "plane_frame"]
+__all__ = ["HeightFit", "fit_height_field"]
 
 POINT_WEIGHT = 1.0e4
-
-
-def plane_frame(normal: np.ndarray) -> np.ndarray:
-    """Two unit axes spanning the plane of ``normal``, and the normal: rows of a 3x3 matrix."""
-    n = normal / np.linalg.norm(normal)
-    helper = np.eye(3)[np.argmin(np.abs(n))]
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u)
-    return np.stack([u, np.cross(n, u), n])
 
 
 def monomials(degree: int) -> np.ndarray:

@@ -15,7 +15,6 @@ if TYPE_CHECKING:  # trimesh (and SciPy) load in ~0.6 s: only when a Trimesh is 
     import warp as wp
 
 __all__ = [
-    "crop_to_hull",
     "crop_to_support",
     "extract_mesh",
     "sample_trilinear",
@@ -255,26 +254,6 @@ def crop_to_support(
     return np.asarray(vertices)[used], index[faces], np.asarray(support)[used]
 
 
-def crop_to_hull(mesh: trimesh.Trimesh, anchors: np.ndarray) -> trimesh.Trimesh:
-    """Keep the faces whose centres fall inside the hull of ``anchors`` (the paper's figures).
-
-    The anchors (ray intersections and point constraints) are projected onto their best-fit
-    plane, and a face is kept when its centre's projection lies in their 2-D convex hull.
-
-    Raises:
-        ReconstructionError: If fewer than three anchors span a plane, or nothing is inside.
-    """
-    from .evaluate import hull_region
-
-    keep = hull_region(np.asarray(anchors, dtype=np.float64)).contains(mesh.triangles_center)
-    if not np.any(keep):
-        raise ReconstructionError("crop: no face of the mesh lies inside the constraints' hull")
-    out = mesh.copy()
-    out.update_faces(keep)
-    out.remove_unreferenced_vertices()
-    return out
-
-
 def supported_components(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray,
                          *, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Drop the connected pieces of a mesh that come nowhere near the data.
@@ -321,60 +300,3 @@ def is_open(faces: np.ndarray) -> bool:
     keys = edges[:, 0] * (int(faces.max()) + 1) + edges[:, 1]
     _, counts = np.unique(keys, return_counts=True)
     return bool(np.any(counts == 1))
-
-
-HULL_ANCHORS = 4096
-"""Most anchors :func:`crop_to_data_hull` builds its hulls from (an even subset beyond)."""
-HULL_CHUNK = 2**22
-"""Face-facet pairs tested at once by :func:`crop_to_data_hull` (32 MiB of float64)."""
-
-
-def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *,
-                      margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Keep the faces whose centres lie within ``margin`` of the anchors' convex hulls.
-
-    What an open surface's data determines: between the constraints the fit interpolates,
-    beyond them it extrapolates (the back of a cylinder seen from one side, the rim of a
-    patch). A centre is kept when it lies in the anchors' 3-D convex hull and in their 2-D
-    hull on their best-fit plane, each grown by ``margin`` (the 3-D hull alone is a thin slab
-    for flat data, whose facets reach far sideways; the 2-D one alone folds a patch that wraps
-    past 180 degrees onto itself). A hull that cannot be built (too few anchors, all on a
-    line or a plane) does not crop.
-
-    Returns:
-        The kept vertices and faces (re-indexed).
-    """
-    from scipy.spatial import ConvexHull, QhullError
-
-    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
-    faces = np.asarray(faces)
-    if len(anchors) < 4 or len(faces) == 0:
-        return vertices, faces
-    if len(anchors) > HULL_ANCHORS:
-        # a dense cloud: its hull is as good from an even subset, and the facets stay few
-        anchors = anchors[np.linspace(0, len(anchors) - 1, HULL_ANCHORS).astype(np.int64)]
-    centre = anchors.mean(axis=0)
-    scale = float(np.max(np.abs(anchors - centre))) or 1.0
-    a = (anchors - centre) / scale
-    x = (np.asarray(vertices)[faces].mean(axis=1) - centre) / scale
-    m = margin / scale
-    keep = np.ones(len(faces), dtype=bool)
-    _, _, vt = np.linalg.svd(a, full_matrices=False)
-    for points, queries in ((a, x), (a @ vt[:2].T, x @ vt[:2].T)):
-        try:
-            hull = ConvexHull(points)
-        except (QhullError, ValueError):
-            continue
-        d = hull.equations.shape[1] - 1
-        normals, offsets = hull.equations[:, :d].T, hull.equations[:, d]
-        chunk = max(1, HULL_CHUNK // len(offsets))  # bounded memory: faces x facets
-        for k in range(0, len(queries), chunk):
-            q = queries[k:k + chunk]
-            keep[k:k + chunk] &= (q @ normals + offsets).max(axis=1) <= m
-    if not keep.any() or keep.all():
-        return vertices, faces
-    kept = faces[keep]
-    used = np.unique(kept)
-    index = np.full(len(vertices), -1, dtype=np.int64)
-    index[used] = np.arange(len(used))
-    return np.asarray(vertices)[used], index[kept]

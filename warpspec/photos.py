@@ -38,12 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import InputError, SceneError
+from .geometry import LIGHT_CODES
 
 __all__ = ["PhotoSet", "closed_sphere", "render_photos", "run_sfm"]
-
-_LIGHT_CODES = {"directional": 0, "point": 1, "camera": 2}
-
 
 @dataclass(frozen=True)
 class PhotoSet:
@@ -209,7 +207,7 @@ def render_photos(
         What was written (:class:`PhotoSet`).
 
     Raises:
-        SceneError: If an option is out of range or the scene cannot be rendered.
+        InputError: If an option is out of range or the scene cannot be rendered.
     """
     import trimesh
     import warp as wp
@@ -220,24 +218,24 @@ def render_photos(
     from .kernels.render import launch_shade, launch_trace, launch_visible
 
     if not (isinstance(scale, int | float) and math.isfinite(scale) and scale > 0):
-        raise SceneError(f"scale: expected a positive number, got {scale!r}")
+        raise InputError(f"scale: expected a positive number, got {scale!r}")
     intr = synthetic.intrinsics
     width, height = intr.width * scale, intr.height * scale
     if abs(width - round(width)) > 1e-9 or abs(height - round(height)) > 1e-9:
-        raise SceneError(f"scale: {scale:g} x {intr.width}x{intr.height} is not a whole number "
+        raise InputError(f"scale: {scale:g} x {intr.width}x{intr.height} is not a whole number "
                          "of pixels")
     width, height = int(round(width)), int(round(height))
     for name, value, low in (("samples", samples, 1), ("background_points", background_points, 0),
                              ("object_points", object_points, 0), ("spots", spots, 0),
                              ("saturated_spots", saturated_spots, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise SceneError(f"{name}: expected an integer >= {low}, got {value!r}")
+            raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
     if saturated_spots > spots:
-        raise SceneError(f"saturated_spots: {saturated_spots} is more than spots={spots}")
+        raise InputError(f"saturated_spots: {saturated_spots} is more than spots={spots}")
     if spots > background_points:
-        raise SceneError(f"spots: {spots} is more than background_points={background_points}")
+        raise InputError(f"spots: {spots} is more than background_points={background_points}")
     if not (math.isfinite(noise) and noise >= 0):
-        raise SceneError(f"noise: expected a number >= 0, got {noise!r}")
+        raise InputError(f"noise: expected a number >= 0, got {noise!r}")
     dev = resolve_device(device)
     rng = np.random.default_rng(seed)
     out = Path(folder)
@@ -314,7 +312,7 @@ def render_photos(
     views = bseen.sum(axis=0)
     good = np.flatnonzero(views >= 2)
     if len(good) < background_points:
-        raise SceneError(f"background_points: only {len(good)} room points are seen by two "
+        raise InputError(f"background_points: only {len(good)} room points are seen by two "
                          "cameras")
     good = good[rng.permutation(len(good))[:background_points]]
     # The spots: the background points seen by the most cameras.
@@ -367,7 +365,7 @@ def render_photos(
             nrm[on_object] = surface.normal(p)
             normal = wp.array(nrm, dtype=wp.vec3, device=dev)
         rgb = launch_shade(mesh, c, direction, t, face, normal, object_faces=len(ofaces),
-                           light_type=_LIGHT_CODES[kind], light_vec=light_vec,
+                           light_type=LIGHT_CODES[kind], light_vec=light_vec,
                            light_ref=light_ref, shininess=shininess, specular=4.0,
                            object_albedo=(0.22, 0.2, 0.25), ambient=0.25,
                            texture_scale=extent / 40.0, seed=seed, spots=wspots,
@@ -437,23 +435,23 @@ def run_sfm(images: str | os.PathLike, workspace: str | os.PathLike) -> Path:
         The folder of the first model, ``workspace/sparse/0``.
 
     Raises:
-        SceneError: If pycolmap is not installed, the workspace is in use, or no image could
+        InputError: If pycolmap is not installed, the workspace is in use, or no image could
             be registered.
     """
     try:
         import pycolmap
     except ImportError:
-        raise SceneError("--sfm: needs pycolmap (pip install 'warpspec[photos]')") from None
+        raise InputError("--sfm: needs pycolmap (pip install 'warpspec[photos]')") from None
     images, workspace = Path(images), Path(workspace)
     if not images.is_dir():
-        raise SceneError(f"--sfm: {images} is not a folder of photographs")
+        raise InputError(f"--sfm: {images} is not a folder of photographs")
     if workspace.exists() and any(workspace.iterdir()):
-        raise SceneError(f"--sfm: {workspace} is not empty; give a new or empty folder")
+        raise InputError(f"--sfm: {workspace} is not empty; give a new or empty folder")
     workspace.mkdir(parents=True, exist_ok=True)
     database = workspace / "database.db"
     pycolmap.extract_features(database, images)
     pycolmap.match_exhaustive(database)
     maps = pycolmap.incremental_mapping(database, images, workspace / "sparse")
     if not maps:
-        raise SceneError(f"--sfm: COLMAP registered none of the photographs of {images}")
+        raise InputError(f"--sfm: COLMAP registered none of the photographs of {images}")
     return workspace / "sparse" / "0"

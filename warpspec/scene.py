@@ -22,6 +22,15 @@ from typing import Any
 import numpy as np
 
 from .errors import SceneError
+from .geometry import (
+    LIGHT_CAMERA,
+    LIGHT_CODES,
+    LIGHT_DIRECTIONAL,
+    LIGHT_KINDS,
+    LIGHT_POINT,
+    best_fit_plane,
+    camera_centre,
+)
 
 __all__ = [
     "FORMAT_NAME",
@@ -39,15 +48,6 @@ FORMAT_NAME = "warpspec-scene"
 FORMAT_VERSION = 1
 """The scene file version this module reads and writes."""
 
-LIGHT_DIRECTIONAL = 0
-"""Light code of a directional light (one constant direction ``L``)."""
-LIGHT_POINT = 1
-"""Light code of a point light (``L = normalize(p - x)``)."""
-LIGHT_CAMERA = 2
-"""Light code of a flash at the camera centre (``N = -r``)."""
-
-_LIGHT_CODES = {"directional": LIGHT_DIRECTIONAL, "point": LIGHT_POINT, "camera": LIGHT_CAMERA}
-_LIGHT_KINDS = '"directional", "point" or "camera"'
 
 MAX_SCENE_BYTES = 1024 * 2**20
 """Largest scene file read (1 GiB: about 15 million points in JSON)."""
@@ -58,8 +58,6 @@ _MAX_CAMERA_COND = 1e12
 _MIN_HALF_VECTOR = 1e-9
 # check() warns when the normal is more than this many degrees from the direction to the camera.
 _GRAZING_DEGREES = 80.0
-# Points whose second singular value is below this fraction of the first are collinear.
-_COLLINEAR_TOL = 1e-9
 
 _TOP_KEYS = frozenset(
     {"format", "version", "cameras", "light", "specularities", "points", "domain"}
@@ -341,16 +339,16 @@ class Light:
     vector: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.kind, str) or self.kind not in _LIGHT_CODES:
+        if not isinstance(self.kind, str) or self.kind not in LIGHT_CODES:
             raise _error(
-                "light.type", f"unknown light type {_show(self.kind)}, expected {_LIGHT_KINDS}"
+                "light.type", f"unknown light type {_show(self.kind)}, expected {LIGHT_KINDS}"
             )
         object.__setattr__(self, "vector", _light_vector(self.kind, self.vector, "light"))
 
     @property
     def code(self) -> int:
         """The ``LIGHT_*`` code of this kind, as used by the Warp kernels."""
-        return _LIGHT_CODES[self.kind]
+        return LIGHT_CODES[self.kind]
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Light):
@@ -404,9 +402,9 @@ def _light_from_dict(data: Any, field: str, unknown: list[str]) -> Light:
         )
     kind = data.get("type", _MISSING)
     if kind is _MISSING:
-        raise _error(f"{field}.type", f"missing, expected {_LIGHT_KINDS}")
-    if not isinstance(kind, str) or kind not in _LIGHT_CODES:
-        raise _error(f"{field}.type", f"unknown light type {_show(kind)}, expected {_LIGHT_KINDS}")
+        raise _error(f"{field}.type", f"missing, expected {LIGHT_KINDS}")
+    if not isinstance(kind, str) or kind not in LIGHT_CODES:
+        raise _error(f"{field}.type", f"unknown light type {_show(kind)}, expected {LIGHT_KINDS}")
     _note_unknown(data, _LIGHT_KEYS[kind], field, unknown)
     if kind == "camera":
         return Light("camera")
@@ -1000,16 +998,11 @@ class Scene:
                     "the light"
                 )
 
-        if self.num_points >= 3:
-            scale = float(np.max(np.abs(self.points)))
-            centred = self.points / scale if scale > 0 else self.points
-            centred = centred - centred.mean(axis=0)
-            sv = np.linalg.svd(centred, compute_uv=False)
-            if sv[1] <= _COLLINEAR_TOL * sv[0] or sv[0] == 0:
-                messages.append(
-                    f"points: all {self.num_points} points are collinear, so they do not "
-                    "determine the initial plane"
-                )
+        if self.num_points >= 3 and best_fit_plane(self.points)[1] is None:
+            messages.append(
+                f"points: all {self.num_points} points are collinear, so they do not "
+                "determine the initial plane"
+            )
 
         for message in messages:
             warnings.warn(message, SceneWarning, stacklevel=2)
@@ -1034,7 +1027,7 @@ def _camera_centre(P: np.ndarray, field: str) -> np.ndarray:
                 "expected a finite camera, got a singular left 3x3 block "
                 f"(condition number {cond:.3g}, at most {_MAX_CAMERA_COND:.0e} accepted)",
             )
-        centre = -np.linalg.solve(M, P[:, 3])
+        centre = camera_centre(P)
     if not np.all(np.isfinite(centre)):
         raise _error(field, "the camera centre -M^-1 p4 is not finite (badly scaled matrix)")
     return centre

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from .. import geometry
 from .sampling import trilinear
 
 wp.set_module_options({"enable_backward": False})
@@ -25,11 +26,11 @@ __all__ = [
     "slab",
 ]
 
-LIGHT_DIRECTIONAL = wp.constant(0)
+LIGHT_DIRECTIONAL = wp.constant(geometry.LIGHT_DIRECTIONAL)
 
-LIGHT_POINT = wp.constant(1)
+LIGHT_POINT = wp.constant(geometry.LIGHT_POINT)
 
-LIGHT_CAMERA = wp.constant(2)
+LIGHT_CAMERA = wp.constant(geometry.LIGHT_CAMERA)
 
 BISECTIONS = wp.constant(30)
 

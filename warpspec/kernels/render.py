@@ -18,14 +18,16 @@ from __future__ import annotations
 
 import warp as wp
 
+from .. import geometry
+
 wp.set_module_options({"enable_backward": False})
 
 __all__ = ["LIGHT_CAMERA", "LIGHT_DIRECTIONAL", "LIGHT_POINT", "launch_shade", "launch_trace",
            "launch_visible"]
 
-LIGHT_DIRECTIONAL = 0
-LIGHT_POINT = 1
-LIGHT_CAMERA = 2
+LIGHT_DIRECTIONAL = wp.constant(geometry.LIGHT_DIRECTIONAL)
+LIGHT_POINT = wp.constant(geometry.LIGHT_POINT)
+LIGHT_CAMERA = wp.constant(geometry.LIGHT_CAMERA)
 NO_HIT = -1
 
 

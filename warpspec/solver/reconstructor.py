@@ -16,12 +16,12 @@ import warp as wp
 
 from .._runtime import init, resolve_device
 from ..errors import InputError, ReconstructionError
+from ..geometry import crop_to_data_hull
 from ..grid import Grid
 from ..implicit import rejected_summary
 from ..kernels.flow import launch_flow_step, launch_flow_step_band
 from ..kernels.measures import MEASURE_SLOTS
 from ..mesh import (
-    crop_to_data_hull,
     is_open,
     supported_components,
     triangulate,
@@ -386,7 +386,8 @@ class Reconstructor:
         Args:
             crop: Crop an open surface to where the data reaches: the faces inside the convex
                 hull of the rays' hits and the points, grown by :data:`CROP_MARGIN` of the
-                domain (:func:`warpspec.mesh.crop_to_data_hull`; three voxels at resolution 64).
+                domain (:func:`warpspec.geometry.crop_to_data_hull`; three voxels at
+                resolution 64).
                 Beyond it the surface is the fit's extrapolation, which no constraint speaks
                 for. A closed surface is never cropped. ``False`` keeps the whole zero set.
 

@@ -17,9 +17,10 @@ import numpy as np
 import warp as wp
 
 from ..errors import InputError, SceneError
+from ..geometry import best_fit_plane, plane_frame
 from ..grid import Grid
 from ..implicit import FitReport, ImplicitStart
-from ..initial import fit_height_field, plane_frame
+from ..initial import fit_height_field
 from ..kernels.start_fields import launch_bend, launch_blend, launch_height_field, launch_plane
 from ..scene import Scene
 from .workspace import Workspace
@@ -80,14 +81,10 @@ def initial_plane(scene: Scene, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     points = scene.points
     centres = scene.camera_centres()
     if len(points):
-        centroid = points.mean(axis=0)
+        centroid, axes = best_fit_plane(points)
     else:
-        centroid = grid.origin + 0.5 * (grid.upper - grid.origin)
-    normal = None
-    if len(points) >= 3:
-        _, s, vt = np.linalg.svd(points - centroid, full_matrices=False)
-        if s[1] > 1e-6 * max(s[0], 1e-300):
-            normal = vt[2]
+        centroid, axes = grid.origin + 0.5 * (grid.upper - grid.origin), None
+    normal = None if axes is None else axes[2]
     if normal is None:
         if scene.num_specularities:
             origins, dirs = scene.rays()
