@@ -163,6 +163,9 @@ class FitReport:
         rejected: Indices of the rays rejected as inconsistent with the others.
         guess: The first guess's kind (``"sphere"`` or ``"plane"``).
         cg_iterations: Conjugate-gradient iterations of each fit.
+        distance: Whether the field written is already a distance near its zero set (the
+            quadric's first-order distance ``q / |grad q|``, exact to second order there), so
+            that the flow can start from it without a redistance.
     """
 
     levels: list[int]
@@ -172,6 +175,7 @@ class FitReport:
     rejected: np.ndarray
     guess: str
     cg_iterations: list[int] = field(default_factory=list)
+    distance: bool = False
 
 
 class _Level:
@@ -367,7 +371,7 @@ class ImplicitStart:
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
-                         cg_iterations=cg)
+                         cg_iterations=cg, distance=not ladder)
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
         """Fit on every level of the ladder, each started from the one below."""

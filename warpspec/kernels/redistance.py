@@ -39,10 +39,12 @@ BAND_MODES = {"axis": 0, "gradient": 1}
 """Band initialisations accepted by :class:`Redistancer` and their kernel codes."""
 
 METHODS = ("auto", "serial", "planes")
-
-BAND_PASSES = 8
-"""Default relaxation passes of :meth:`Redistancer.reinitialize_band`."""
 """Sweep methods accepted by :class:`Redistancer`."""
+
+BAND_PASSES = 4
+"""Default relaxation passes of :meth:`Redistancer.reinitialize_band`: on the octant at 64^3
+with a band of 8 voxels, 4 passes reach the full reinitialisation's values within 4 h of the
+surface to 8e-4 h (8 passes: 1e-6 h), at half the cost."""
 
 # flags per node: bit 0 inside (phi < 0); bit 1 frozen (a band node, kept by the sweeps);
 # bit 2 active (a neighbour changed since the node was last updated: the "locking" of Bak,

@@ -222,7 +222,10 @@ class ImplicitFit(Start):
                             (ws.ray_origin, ws.ray_dir, ws.light_code, ws.light_vec),
                             ws.points)
         report = fit.run(ws.phi)
-        ws.redistancer.reinitialize(ws.phi, cap=ws.far_cap)
+        if not (report.distance and ws.band is not None):
+            # a quadric's first-order distance needs none near the surface, where the band is
+            # read; the band's first reinitialisation makes the rest a distance
+            ws.redistancer.reinitialize(ws.phi, cap=ws.far_cap)
         ws.version += 1
         start = ws.phi.numpy().copy()
         keep = np.flatnonzero(report.weights > 0.0) if scene.num_specularities \

@@ -18,11 +18,12 @@ from .workspace import Workspace
 
 __all__ = ["FULL_REINIT_EVERY", "BandTracker"]
 
-FULL_REINIT_EVERY = 5
+FULL_REINIT_EVERY = 10
+"""Every this many reinitialisations redistance the whole grid (up to the cap), not the band
+alone: nodes beyond the band keep old distances between, whose error grows as the surface
+moves (the flow moves it a fraction of a voxel in 100 iterations)."""
 FAR_CAP_MARGIN = 4.0
 """Voxels beyond the narrow band that a full redistance still computes exactly."""
-"""Every this many reinitialisations redistance the whole grid, not the band alone: far nodes
-keep old distances between, whose error grows as the surface moves."""
 
 
 class BandTracker:
