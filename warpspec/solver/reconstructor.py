@@ -375,6 +375,24 @@ class Reconstructor:
         if callback is not None:
             callback(m)
 
+    def _wraps_around(self, hits: np.ndarray) -> bool:
+        """Whether the normals at the hits leave every half-space (about their mean).
+
+        Then the data wraps past 180 degrees (a cylinder patch seen from a ring of cameras)
+        and the fit's extrapolation closes behind it: the crop is needed. Seen from one side,
+        the open surface is kept whole: its rims lie beyond the data by the curvature between
+        far-apart constraints, and a crop would cut into them (the wine bottle's label).
+        """
+        ok = np.all(np.isfinite(hits), axis=1)
+        if ok.sum() < 2:
+            return False
+        origins, dirs = self.scene.rays()
+        normals = self.scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
+        mean = normals.sum(axis=0)
+        if not np.linalg.norm(mean) > 1e-9:
+            return True
+        return bool(np.min(normals @ (mean / np.linalg.norm(mean))) < 0.0)
+
     @property
     def default_iterations(self) -> int:
         """Iterations of the flow the automatic schedule gives this grid."""
@@ -384,8 +402,9 @@ class Reconstructor:
         """The current surface as a :class:`Result` (mesh, level set, grid, history).
 
         Args:
-            crop: Crop an open surface to where the data reaches: the faces inside the convex
-                hull of the rays' hits and the points, grown by :data:`CROP_MARGIN` of the
+            crop: Crop an open surface that wraps past 180 degrees to where the data reaches:
+                the faces inside the convex hull of the rays' hits and the points, grown by
+                :data:`CROP_MARGIN` of the
                 domain (:func:`warpspec.geometry.crop_to_data_hull`; three voxels at
                 resolution 64).
                 Beyond it the surface is the fit's extrapolation, which no constraint speaks
@@ -407,7 +426,7 @@ class Reconstructor:
                              self.scene.points.reshape(-1, 3)])
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing)
-        if crop and is_open(faces):
+        if crop and is_open(faces) and self._wraps_around(hits):
             # a fixed share of the domain, so that the crop does not depend on the resolution
             margin = CROP_MARGIN * float(np.max(self.grid.upper - self.grid.origin))
             margin = max(margin, SUPPORT_RADIUS * self.grid.spacing)
