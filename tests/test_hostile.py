@@ -67,6 +67,9 @@ def scaled(data: dict, s: float) -> dict:
         cam["P"] = P.tolist()
     data["points"] = (np.array(data["points"]) * s).tolist()
     data["domain"] = {k: (np.array(v) * s).tolist() for k, v in data["domain"].items()}
+    for light in [data.get("light")] + [c.get("light") for c in data["cameras"]]:
+        if light and light.get("type") == "point":
+            light["position"] = (np.array(light["position"]) * s).tolist()
     return data
 
 
@@ -619,3 +622,18 @@ def test_a_scene_without_points_is_not_supported():
     result = ws.reconstruct(scene, iterations=5, resolution=20, start="paper", device="cpu")
     assert not result.verdict.supported
     assert any("no point constraints" in r for r in result.verdict.reasons)
+
+
+@pytest.mark.parametrize("s", [1e-6, 1e9])
+def test_the_default_start_is_free_of_units_too(s):
+    """The implicit start (quadric and grid fit) at 1e-6 and 1e9 gives the mesh scaled."""
+    from warpspec.synthetic import make_scene
+
+    data = make_scene("point-light").scene_dict  # not a quadric: the grid fit runs
+    ref = ws.reconstruct(ws.Scene.from_dict(data), iterations=10, resolution=24, device="cpu")
+    run_ = ws.reconstruct(ws.Scene.from_dict(scaled(data, s)), iterations=10, resolution=24,
+                          device="cpu")
+    assert run_.vertices.shape == ref.vertices.shape
+    assert np.array_equal(run_.faces, ref.faces)
+    extent = np.ptp(ref.vertices, axis=0).max()
+    assert np.abs(run_.vertices / s - ref.vertices).max() <= 1e-5 * extent

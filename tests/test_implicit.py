@@ -255,17 +255,17 @@ def test_conjugate_gradients_solve_the_normal_equations():
     grid = Grid(origin=np.zeros(3), spacing=0.25, shape=(6, 6, 6))
     level = I._Level(grid, wp.get_device("cpu"))
     rng = np.random.default_rng(5)
-    xs = rng.uniform(0.3, 1.0, size=(12, 3))
+    xs = rng.uniform(0.5, 4.5, size=(12, 3))  # the level's voxels
     normals = rng.normal(size=(12, 3))
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    ys = rng.uniform(0.3, 1.0, size=(3, 3))
+    ys = rng.uniform(0.5, 4.5, size=(3, 3))
     f32 = np.float32
     grads = (wp.array(xs.astype(f32), dtype=wp.vec3), wp.array(np.ones(12, f32), dtype=float))
     nrm = wp.array(normals.astype(f32), dtype=wp.vec3)
     values = (wp.array(ys.astype(f32), dtype=wp.vec3),
               wp.array(np.full(3, 5.0, f32), dtype=float))
     level.f.zero_()
-    level.solve(grads, nrm, values, 400)
+    level.solve(grads, nrm, values, 3000)
     fitted = level.f.numpy().ravel().astype(np.float64)
     # the dense matrix, column by column, and the right-hand side (prev = 0: rhs is G^T N)
     n = grid.size

@@ -11,6 +11,7 @@ collinear. Crops: the regions the constraints cover (their 2-D hull on the best-
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -110,13 +111,19 @@ def best_fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         times the first).
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    centroid = points.mean(axis=0) if len(points) else np.zeros(3)
+    if len(points) == 0:
+        return np.zeros(3), None
+    # scaled first, so that coordinates near the float64 limit neither overflow nor vanish
+    scale = float(np.max(np.abs(points)))
+    scale = scale if 0.0 < scale < math.inf else 1.0
+    unit = points / scale
+    centroid = unit.mean(axis=0)
     if len(points) < 3:
-        return centroid, None
-    _, s, vt = np.linalg.svd(points - centroid, full_matrices=False)
+        return centroid * scale, None
+    _, s, vt = np.linalg.svd(unit - centroid, full_matrices=False)
     if not s[1] > COLLINEAR_TOL * max(s[0], 1e-300):
-        return centroid, None
-    return centroid, vt
+        return centroid * scale, None
+    return centroid * scale, vt
 
 
 def plane_frame(normal: np.ndarray) -> np.ndarray:

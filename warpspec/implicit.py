@@ -26,7 +26,7 @@ import numpy as np
 import warp as wp
 
 from . import quadric as Q
-from .geometry import plane_frame
+from .geometry import LIGHT_POINT, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
 
@@ -186,8 +186,12 @@ class _Level:
         self.device = device
         shape = grid.shape
         self.count = grid.size
-        self.origin = wp.vec3(*(float(v) for v in grid.origin))
-        self.h = float(grid.spacing)
+        # The fit works in this level's voxels: node (i, j, k) at (i, j, k), f in voxels, so
+        # the arithmetic is the same whatever the scene's units.
+        self.origin = wp.vec3(0.0, 0.0, 0.0)
+        self.h = 1.0
+        self.world_origin = np.asarray(grid.origin, dtype=np.float64)
+        self.world_h = float(grid.spacing)
         d = device
         self.f = wp.zeros(shape, dtype=float, device=d)
         self.prev = wp.zeros(shape, dtype=float, device=d)
@@ -200,11 +204,14 @@ class _Level:
         self.second = wp.zeros(shape, dtype=wp.vec3, device=d)
         self.mixed = wp.zeros(shape, dtype=wp.vec3, device=d)
         self.scalars = wp.zeros(4, dtype=wp.float64, device=d)
-        extent = float(np.max(grid.upper - grid.origin))
-        # (second difference / h)^2 and ((f - prev) / h)^2 are free of units
-        self.lam = SMOOTHNESS * (self.h / extent) / self.h**2
-        self.eps = PROXIMITY / self.h**2
+        # the Hessian energy per unit of the domain's length: lam = SMOOTHNESS * h / L
+        self.lam = SMOOTHNESS / float(max(grid.shape) - 1)
+        self.eps = PROXIMITY
         self.prior_term = wp.zeros(shape, dtype=float, device=d)
+
+    def to_grid(self, x: np.ndarray) -> np.ndarray:
+        """World points in this level's voxels."""
+        return (np.asarray(x, dtype=np.float64) - self.world_origin) / self.world_h
 
     def flat(self, a: wp.array) -> wp.array:
         return a.reshape((self.count,))
@@ -297,27 +304,26 @@ class ImplicitStart:
         grid: The requested grid.
         device: The Warp device.
         plane: The paper's plane ``(point, normal)`` (the first guess for one-sided views).
-        rays: Device arrays ``(origins, dirs, light codes, light vectors)`` of the rays.
-        points: Device array of the point constraints.
     """
 
-    def __init__(self, scene, grid: Grid, device, plane, rays, points: wp.array) -> None:
+    def __init__(self, scene, grid: Grid, device, plane) -> None:
         self.scene = scene
         self.grid = grid
         self.device = device
         self.plane = plane
-        self.ray_origin, self.ray_dir, self.light_code, self.light_vec = rays
-        self.points = points
-        m = self.ray_origin.shape[0]
+        m = scene.num_specularities
         self.m = m
         self.anchor = wp.zeros(m, dtype=wp.vec3, device=device)
         self.kind = wp.zeros(m, dtype=int, device=device)
         self.normals = wp.zeros(m, dtype=wp.vec3, device=device)
         self.grad = wp.zeros(m, dtype=wp.vec3, device=device)
-        self.value = wp.zeros(m, dtype=float, device=device)
         self.weights = np.ones(m)
         self.residual = np.zeros(m)
         self.excluded = np.zeros(m, dtype=bool)
+        origins, dirs = scene.rays()
+        codes, vectors = scene.ray_lights()
+        self._rays = (origins, dirs, codes, vectors)
+        self._level_rays = None
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -367,7 +373,8 @@ class ImplicitStart:
             self._update_weights(previous)
             self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
                                                                  != K.ANCHOR_NONE)
-            wp.copy(out, previous.f)
+            wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[previous.f, previous.world_h],
+                      outputs=[out], device=self.device)
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
@@ -382,14 +389,15 @@ class ImplicitStart:
             last = index == len(ladder) - 1
             grid = self.grid if last else Grid.from_bounds(lo, hi, resolution=res)
             level = _Level(grid, self.device)
-            self._quadric_field(grid, level.p)  # the prior, in a scratch field
+            self._use_level_rays(level)
+            self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
             level.set_prior(level.p)
             if previous is None:
                 wp.copy(level.f, level.p)
             else:
                 wp.launch(K.resample, dim=grid.shape,
-                          inputs=[previous.f, previous.origin, previous.h, level.origin,
-                                  level.h], outputs=[level.f], device=self.device)
+                          inputs=[previous.f, previous.world_h / level.world_h],
+                          outputs=[level.f], device=self.device)
             n_rounds = ROUNDS_FINE if last else ROUNDS_COARSE
             for _ in range(n_rounds):
                 cg.append(self._round(level, CG_ITERATIONS_FINE if last else CG_ITERATIONS))
@@ -426,21 +434,32 @@ class ImplicitStart:
                 self.grid.spacing
         return bool(within)
 
-    def _quadric_field(self, grid: Grid, out: wp.array) -> None:
+    def _quadric_field(self, grid: Grid, out: wp.array, *, unit: float = 1.0) -> None:
+        """The quadric's first-order distance on ``grid``, in units of ``unit``."""
         q = self.quadric
+        start = (np.asarray(grid.origin, dtype=np.float64) - q.centre) / q.scale
         wp.launch(K.quadric_field, dim=grid.shape,
-                  inputs=[wp.vec3(*(float(v) for v in grid.origin)), float(grid.spacing),
-                          wp.vec3(*(float(v) for v in q.centre)), float(q.scale),
+                  inputs=[wp.vec3(*(float(v) for v in start)), float(grid.spacing / q.scale),
                           wp.array(q.coeffs.astype(np.float32), dtype=float,
-                                   device=self.device)],
+                                   device=self.device), float(q.scale / unit)],
                   outputs=[out], device=self.device)
+
+    def _use_level_rays(self, level: _Level) -> None:
+        """The rays in the level's voxels (origins, and point lights' positions)."""
+        origins, dirs, codes, vectors = self._rays
+        vectors = np.where((codes == LIGHT_POINT)[:, None], level.to_grid(vectors), vectors)
+        d, f32 = self.device, np.float32
+        self._level_rays = (
+            wp.array(level.to_grid(origins).astype(f32), dtype=wp.vec3, device=d),
+            wp.array(dirs.astype(f32), dtype=wp.vec3, device=d),
+            wp.array(codes.astype(np.int32), dtype=int, device=d),
+            wp.array(vectors.astype(f32), dtype=wp.vec3, device=d))
 
     def _anchor(self, level: _Level) -> None:
         if self.m == 0:
             return
         wp.launch(K.ray_anchor, dim=self.m,
-                  inputs=[level.f, level.origin, level.h, self.ray_origin, self.ray_dir,
-                          self.light_code, self.light_vec],
+                  inputs=[level.f, level.origin, level.h, *self._level_rays],
                   outputs=[self.anchor, self.kind, self.normals], device=self.device)
 
     def _update_weights(self, level: _Level) -> None:
@@ -469,30 +488,30 @@ class ImplicitStart:
         return level.solve(grads, normals, values, iterations)
 
     def _samples(self, level: _Level):
+        """The samples of the fit, in the level's voxels (anchors are already)."""
         d = self.device
-        h = level.h
         anchors = self.anchor.numpy().astype(np.float64)
         kind = self.kind.numpy()
         normals = self.normals.numpy().astype(np.float64)
-        dirs = self.ray_dir.numpy().astype(np.float64)
+        dirs = self._rays[1]
         live = (kind != K.ANCHOR_NONE) & (self.weights > 0.0)
         xs, ws, ns = [], [], []
         for off, sw in zip(SAMPLE_OFFSETS, SAMPLE_WEIGHTS, strict=True):
-            xs.append(anchors[live] + off * h * dirs[live])
+            xs.append(anchors[live] + off * dirs[live])
             ws.append(sw * self.weights[live])
             ns.append(normals[live])
         xs = np.concatenate(xs) if xs else np.zeros((0, 3))
         ws = np.concatenate(ws) if ws else np.zeros(0)
         ns = np.concatenate(ns) if ns else np.zeros((0, 3))
-        inside = np.all((xs >= level.grid.origin) & (xs <= level.grid.upper), axis=1)
+        top = np.asarray(level.grid.shape, dtype=np.float64) - 1.0
+        inside = np.all((xs >= 0.0) & (xs <= top), axis=1)
         xs, ws, ns = xs[inside], ws[inside], ns[inside]
         # values: the points (f = 0) and, weakly, the nearest approach of missing rays
-        pts = self.scene.points.reshape(-1, 3)
+        pts = level.to_grid(self.scene.points.reshape(-1, 3))
         miss = live & (kind == K.ANCHOR_NEAREST)
         ys = np.concatenate([pts, anchors[miss]])
-        vw = np.concatenate([np.full(len(pts), POINT_WEIGHT / h**2),
-                             MISS_WEIGHT * self.weights[miss] / h**2])
-        ok = np.all((ys >= level.grid.origin) & (ys <= level.grid.upper), axis=1)
+        vw = np.concatenate([np.full(len(pts), POINT_WEIGHT), MISS_WEIGHT * self.weights[miss]])
+        ok = np.all((ys >= 0.0) & (ys <= top), axis=1)
         ys, vw = ys[ok], vw[ok]
         f32 = np.float32
         grads = (wp.array(xs.astype(f32), dtype=wp.vec3, device=d),

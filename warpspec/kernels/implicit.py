@@ -525,16 +525,18 @@ def sample_value(
 @wp.kernel
 def resample(
     coarse: wp.array3d[float],
-    coarse_origin: wp.vec3,
-    coarse_h: float,
-    origin: wp.vec3,
-    h: float,
+    ratio: float,
     fine: wp.array3d[float],
 ):
-    """Trilinear prolongation of a coarse field onto the nodes of a finer grid."""
+    """Trilinear prolongation of a coarse field onto a finer grid with the same first node.
+
+    Both fields are in their own grid's voxels; ``ratio`` is the coarse voxel over the fine
+    one, so fine node ``i`` sits at coarse index ``i / ratio`` and its value is the coarse
+    value times ``ratio``.
+    """
     i, j, k = wp.tid()
-    x = origin + h * wp.vec3(float(i), float(j), float(k))
-    fine[i, j, k] = trilinear(coarse, coarse_origin, coarse_h, x)
+    x = wp.vec3(float(i), float(j), float(k))
+    fine[i, j, k] = ratio * trilinear(coarse, wp.vec3(0.0, 0.0, 0.0), ratio, x)
 
 
 @wp.kernel
@@ -547,17 +549,17 @@ def sphere_field(origin: wp.vec3, h: float, centre: wp.vec3, radius: float,
 
 
 @wp.kernel
-def quadric_field(origin: wp.vec3, h: float, centre: wp.vec3, scale: float,
-                  coeffs: wp.array[float], out: wp.array3d[float]):
-    """First-order signed distance ``q / |grad q|`` of a quadric in normalised coordinates.
+def quadric_field(start: wp.vec3, step: float, coeffs: wp.array[float], out_scale: float,
+                  out: wp.array3d[float]):
+    """First-order signed distance ``out_scale * q / |grad q|`` of a quadric.
 
-    ``q(x) = A00 x^2 + A11 y^2 + A22 z^2 + 2 A01 xy + 2 A02 xz + 2 A12 yz + b.x + c`` with
-    ``x = (world - centre) / scale``; coefficients in that order. The result is in world units;
-    where ``|grad q|`` vanishes it is clamped so that the field stays finite.
+    ``q(x) = A00 x^2 + A11 y^2 + A22 z^2 + 2 A01 xy + 2 A02 xz + 2 A12 yz + b.x + c`` in the
+    quadric's normalised coordinates, node ``(i, j, k)`` at ``x = start + step (i, j, k)``
+    (so no world coordinate, whatever its size, enters the arithmetic); coefficients in that
+    order. Where ``|grad q|`` vanishes it is clamped, so that the field stays finite.
     """
     i, j, k = wp.tid()
-    w = origin + h * wp.vec3(float(i), float(j), float(k))
-    x = (w - centre) / scale
+    x = start + step * wp.vec3(float(i), float(j), float(k))
     q = (coeffs[0] * x[0] * x[0] + coeffs[1] * x[1] * x[1] + coeffs[2] * x[2] * x[2]
          + 2.0 * (coeffs[3] * x[0] * x[1] + coeffs[4] * x[0] * x[2] + coeffs[5] * x[1] * x[2])
          + coeffs[6] * x[0] + coeffs[7] * x[1] + coeffs[8] * x[2] + coeffs[9])
@@ -566,4 +568,11 @@ def quadric_field(origin: wp.vec3, h: float, centre: wp.vec3, scale: float,
                 2.0 * (coeffs[4] * x[0] + coeffs[5] * x[1] + coeffs[2] * x[2]) + coeffs[8])
     gl = wp.max(wp.length(g), 1.0e-3 * (wp.abs(coeffs[0]) + wp.abs(coeffs[1]) + wp.abs(coeffs[2])
                                         + wp.length(wp.vec3(coeffs[6], coeffs[7], coeffs[8]))))
-    out[i, j, k] = scale * q / gl
+    out[i, j, k] = out_scale * q / gl
+
+
+@wp.kernel
+def scaled_copy(src: wp.array3d[float], factor: float, dst: wp.array3d[float]):
+    """``dst = factor * src`` (a field in one level's voxels into world units)."""
+    i, j, k = wp.tid()
+    dst[i, j, k] = factor * src[i, j, k]
