@@ -30,6 +30,7 @@ Examples:
     python examples/any_shape.py                                   # every scene, seeds 0 1 2
     python examples/any_shape.py --scene torus wrap --seeds 0 --resolution 32
     python examples/any_shape.py --outliers 0.1 0.25 --noise 0.5 --json rows.json
+    python examples/any_shape.py --scene freeform --highlights 30 60 120 240
     python examples/any_shape.py --write-scenes examples/scenes      # the example files
 """
 
@@ -157,6 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--outliers", nargs="*", type=float, default=[], metavar="F",
                         help="also run each scene with this fraction of false highlights "
                              "(e.g. 0.1 0.25)")
+    parser.add_argument("--highlights", nargs="+", type=int, default=None, metavar="N",
+                        help="run freeform with each of these highlight counts (e.g. 30 60 "
+                             "120 240; default: its own)")
     parser.add_argument("--resolution", type=int, default=64, help="grid cells (default 64)")
     parser.add_argument("--iterations", type=int, default=300, help="iterations (default 300)")
     parser.add_argument("--samples", type=int, default=20_000,
@@ -192,10 +196,13 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for name in names:
         seeds = args.seeds if name in SHAPES else args.seeds[:1]
-        for seed in seeds:
+        counts = args.highlights if name == "freeform" and args.highlights else [None]
+        for seed, count in ((s, c) for s in seeds for c in counts):
+            options = {} if count is None else {"highlights": count}
             clean_mesh = None
             for label, noise, outliers in _variants(args.noise, args.outliers):
-                synthetic = make_scene(name, noise=noise, outliers=outliers, seed=seed)
+                synthetic = make_scene(name, noise=noise, outliers=outliers, seed=seed,
+                                       **options)
                 row, mesh, h = run_one(synthetic, resolution=args.resolution,
                                        iterations=args.iterations, device=args.device,
                                        samples=args.samples)

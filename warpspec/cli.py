@@ -432,7 +432,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
                 hits=result.hits, normals=normals,
                 cameras=scene.camera_centres(),
                 title=f"{Path(args.scene).name}: {len(mesh.faces)} faces"
-                      f"{f' (cropped: {args.crop})' if args.crop != 'none' else ''}"))
+                      f"{f' (cropped: {args.crop})' if args.crop in ('hull', 'support') else ''}"))
         if plot is not None:
             from .plots import plot_history
 

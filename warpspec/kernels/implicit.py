@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .rays import reflection_normal, slab
+from .rays import bisect_crossing, grid_span, reflection_normal
 from .sampling import cell_corner, corner_weight, grid_coordinate, trilinear
 
 wp.set_module_options({"enable_backward": False})
@@ -68,6 +68,12 @@ def corner_gradient(f: wp.vec3, c: int, inv_h: float) -> wp.vec3:
 
 
 @wp.func
+def corner_node(n: wp.vec3i, c: int) -> wp.vec3i:
+    """Node of corner ``c`` (bits: x, y, z) of the cell whose lowest node is ``n``."""
+    return wp.vec3i(n[0] + (c & 1), n[1] + ((c >> 1) & 1), n[2] + ((c >> 2) & 1))
+
+
+@wp.func
 def cell_of(field: wp.array3d[float], origin: wp.vec3, h: float, x: wp.vec3) -> wp.vec3i:
     """Lowest node of the cell holding the world point ``x`` (clamped to the grid)."""
     return cell_corner(field, grid_coordinate(field, origin, h, x))
@@ -86,8 +92,8 @@ def cell_gradient(field: wp.array3d[float], n: wp.vec3i, fr: wp.vec3, inv_h: flo
     """Gradient of the trilinear interpolant inside one cell."""
     g = wp.vec3(0.0, 0.0, 0.0)
     for c in range(8):
-        g += field[n[0] + (c & 1), n[1] + ((c >> 1) & 1), n[2] + ((c >> 2) & 1)] * \
-            corner_gradient(fr, c, inv_h)
+        q = corner_node(n, c)
+        g += field[q[0], q[1], q[2]] * corner_gradient(fr, c, inv_h)
     return g
 
 
@@ -230,8 +236,8 @@ def gradient_apply(
     inv_h = 1.0 / h
     g = cell_gradient(f, n, fr, inv_h)
     for c in range(8):
-        wp.atomic_add(out, n[0] + (c & 1), n[1] + ((c >> 1) & 1), n[2] + ((c >> 2) & 1),
-                      w * wp.dot(corner_gradient(fr, c, inv_h), g))
+        q = corner_node(n, c)
+        wp.atomic_add(out, q[0], q[1], q[2], w * wp.dot(corner_gradient(fr, c, inv_h), g))
 
 
 @wp.kernel
@@ -255,11 +261,9 @@ def gradient_rhs(
     inv_h = 1.0 / h
     for c in range(8):
         gc = corner_gradient(fr, c, inv_h)
-        i = n[0] + (c & 1)
-        j = n[1] + ((c >> 1) & 1)
-        k = n[2] + ((c >> 2) & 1)
-        wp.atomic_add(rhs, i, j, k, w * wp.dot(gc, normals[s]))
-        wp.atomic_add(diag, i, j, k, w * wp.dot(gc, gc))
+        q = corner_node(n, c)
+        wp.atomic_add(rhs, q[0], q[1], q[2], w * wp.dot(gc, normals[s]))
+        wp.atomic_add(diag, q[0], q[1], q[2], w * wp.dot(gc, gc))
 
 
 @wp.kernel
@@ -280,10 +284,11 @@ def value_apply(
     fr = cell_fraction(f, origin, h, ys[s], n)
     v = float(0.0)
     for c in range(8):
-        v += corner_weight(fr, c) * f[n[0] + (c & 1), n[1] + ((c >> 1) & 1), n[2] + ((c >> 2) & 1)]
+        q = corner_node(n, c)
+        v += corner_weight(fr, c) * f[q[0], q[1], q[2]]
     for c in range(8):
-        wp.atomic_add(out, n[0] + (c & 1), n[1] + ((c >> 1) & 1), n[2] + ((c >> 2) & 1),
-                      w * corner_weight(fr, c) * v)
+        q = corner_node(n, c)
+        wp.atomic_add(out, q[0], q[1], q[2], w * corner_weight(fr, c) * v)
 
 
 @wp.kernel
@@ -301,8 +306,8 @@ def value_diagonal(
     fr = cell_fraction(field, origin, h, ys[s], n)
     for c in range(8):
         cw = corner_weight(fr, c)
-        wp.atomic_add(diag, n[0] + (c & 1), n[1] + ((c >> 1) & 1), n[2] + ((c >> 2) & 1),
-                      ws[s] * cw * cw)
+        q = corner_node(n, c)
+        wp.atomic_add(diag, q[0], q[1], q[2], ws[s] * cw * cw)
 
 
 @wp.kernel
@@ -455,9 +460,7 @@ def ray_anchor(
     r = wp.tid()
     o = ray_origin[r]
     d = ray_dir[r]
-    hi = origin + h * wp.vec3(float(f.shape[0] - 1), float(f.shape[1] - 1),
-                              float(f.shape[2] - 1))
-    span = slab(o, d, origin, hi)
+    span = grid_span(f, origin, h, o, d)
     kind[r] = ANCHOR_NONE
     if span[0] > span[1]:
         return
@@ -471,15 +474,7 @@ def ray_anchor(
         t = span[0] + float(s) * dt
         v = trilinear(f, origin, h, o + t * d)
         if f_prev > 0.0 and v <= 0.0:
-            a = t_prev
-            b = t
-            for _ in range(30):
-                m = 0.5 * (a + b)
-                if trilinear(f, origin, h, o + m * d) > 0.0:
-                    a = m
-                else:
-                    b = m
-            x = o + (0.5 * (a + b)) * d
+            x = o + bisect_crossing(f, origin, h, o, d, t_prev, t) * d
             anchor[r] = x
             kind[r] = ANCHOR_CROSSING
             normals[r] = reflection_normal(light_code[r], light_vec[r], d, x)

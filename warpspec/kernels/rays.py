@@ -61,6 +61,29 @@ def reflection_normal(code: int, light: wp.vec3, r: wp.vec3, x: wp.vec3) -> wp.v
         to_light = wp.normalize(light - x)
     return wp.normalize(to_light - r)
 
+@wp.func
+def grid_span(phi: wp.array3d[float], origin: wp.vec3, h: float, o: wp.vec3,
+              d: wp.vec3) -> wp.vec2:
+    """Parameter interval of the ray ``o + t d`` inside the grid's box (empty: t0 > t1)."""
+    hi = origin + h * wp.vec3(
+        float(phi.shape[0] - 1), float(phi.shape[1] - 1), float(phi.shape[2] - 1)
+    )
+    return slab(o, d, origin, hi)
+
+
+@wp.func
+def bisect_crossing(phi: wp.array3d[float], origin: wp.vec3, h: float, o: wp.vec3,
+                    d: wp.vec3, a: float, b: float) -> float:
+    """The ray parameter of the ``+ -> -`` crossing between ``a`` (phi > 0) and ``b``."""
+    for _ in range(BISECTIONS):
+        m = 0.5 * (a + b)
+        if trilinear(phi, origin, h, o + m * d) > 0.0:
+            a = m
+        else:
+            b = m
+    return 0.5 * (a + b)
+
+
 @wp.kernel
 def intersect(
     phi: wp.array3d[float],
@@ -78,10 +101,7 @@ def intersect(
     r = wp.tid()
     o = ray_origin[r]
     d = ray_dir[r]
-    hi = origin + h * wp.vec3(
-        float(phi.shape[0] - 1), float(phi.shape[1] - 1), float(phi.shape[2] - 1)
-    )
-    span = slab(o, d, origin, hi)
+    span = grid_span(phi, origin, h, o, d)
     active[r] = 0
     if span[0] > span[1]:
         return
@@ -94,15 +114,7 @@ def intersect(
         t = span[0] + float(s) * dt
         f = trilinear(phi, origin, h, o + t * d)
         if f_prev > 0.0 and f <= 0.0:
-            a = t_prev
-            b = t
-            for _ in range(BISECTIONS):
-                m = 0.5 * (a + b)
-                if trilinear(phi, origin, h, o + m * d) > 0.0:
-                    a = m
-                else:
-                    b = m
-            x = o + (0.5 * (a + b)) * d
+            x = o + bisect_crossing(phi, origin, h, o, d, t_prev, t) * d
             hits[r] = x
             active[r] = 1
             normals[r] = reflection_normal(light_code[r], light_vec[r], d, x)
