@@ -301,3 +301,11 @@ def test_a_dense_point_cloud_pulls_as_the_sparse_one_does():
     assert result.verdict.supported and result.verdict.normal_error_deg < 2.0
     err = np.abs(np.linalg.norm(result.vertices, axis=1) - 1.0) / result.grid.spacing
     assert err.mean() < 0.05
+
+
+def test_the_set_up_reports_its_stages():
+    said: list[str] = []
+    ws.Reconstructor(make_scene("freeform").scene(), resolution=32, device="cpu",
+                     progress=said.append)
+    assert said[0].startswith("a quadric fitted to 60 rays and 5 points")
+    assert "grid 16 of 16, 32" in said and "grid 32 of 16, 32" in said

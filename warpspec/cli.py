@@ -183,6 +183,11 @@ class _Progress:
         if self.enabled:
             _say(f"{name}: {detail}" if detail else f"{name} ...")
 
+    def detail(self, text: str) -> None:
+        """Say what the current stage is doing now."""
+        if self.enabled:
+            _say(f"  {text}")
+
     def done(self, name: str) -> None:
         """Say how long the stage ``name`` took."""
         began = self._began.pop(name, None)
@@ -354,6 +359,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             device=device,
             reinit_every=args.reinit_every,
             resume=resume,
+            progress=progress.detail,
         )
     except InputError as exc:
         raise _flag_message(exc) from None

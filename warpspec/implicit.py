@@ -20,6 +20,7 @@ point through the points; otherwise the paper's plane through the points, facing
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -304,9 +305,12 @@ class ImplicitStart:
         grid: The requested grid.
         device: The Warp device.
         plane: The paper's plane ``(point, normal)`` (the first guess for one-sided views).
+        progress: Called with a few words as each stage begins (or ``None``).
     """
 
-    def __init__(self, scene, grid: Grid, device, plane) -> None:
+    def __init__(self, scene, grid: Grid, device, plane, *,
+                 progress: Callable[[str], None] | None = None) -> None:
+        self.progress = progress
         self.scene = scene
         self.grid = grid
         self.device = device
@@ -335,6 +339,7 @@ class ImplicitStart:
             initial = Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
         else:
             initial = Q.plane(guess.centre, guess.normal, frame_centre=frame, scale=scale)
+        self._say(f"a quadric fitted to {self.m} rays and {self.scene.num_points} points")
         quad, self.weights, self.residual = Q.fit_quadric(
             self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing)
         self.quadric = quad
@@ -388,6 +393,7 @@ class ImplicitStart:
         for index, res in enumerate(ladder):
             last = index == len(ladder) - 1
             grid = self.grid if last else Grid.from_bounds(lo, hi, resolution=res)
+            self._say(f"grid {res} of {', '.join(map(str, ladder))}")
             level = _Level(grid, self.device)
             self._use_level_rays(level)
             self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
@@ -404,6 +410,10 @@ class ImplicitStart:
             rounds.append(n_rounds)
             previous = level
         return previous
+
+    def _say(self, text: str) -> None:
+        if self.progress is not None:
+            self.progress(text)
 
     def _outliers(self) -> np.ndarray:
         """Rays whose normal the soft fit misses by more than noise allows."""

@@ -95,6 +95,8 @@ class Reconstructor:
             derived from the scene).
         resume: Start from a level set saved with :meth:`Result.save_phi` (its grid is used):
             ``phi0=Result.load(resume)`` without meshing it.
+        progress: Called with a few words as each stage of the set-up begins (the quadric,
+            each grid of the implicit start's ladder), for a progress display.
 
     Raises:
         InputError: If an option is out of range or of the wrong type, the grid would not fit
@@ -126,6 +128,7 @@ class Reconstructor:
         grid: Grid | None = None,
         phi0: Result | np.ndarray | None = None,
         resume: str | os.PathLike | None = None,
+        progress: Callable[[str], None] | None = None,
     ) -> None:
         if not isinstance(scene, Scene):
             raise InputError(f"scene: expected a warpspec.Scene, got {type(scene).__name__}")
@@ -185,6 +188,7 @@ class Reconstructor:
                                    band=opts["narrow_band"] is not None and self.reinit_every > 0)
         self._tracker = BandTracker(self.workspace, width=opts["narrow_band"])
         self.workspace.far_cap = self._tracker.far_cap
+        self.workspace.progress = progress
 
         h = grid.spacing
         self.dt = self.cfl * h * h / (6.0 * (1.0 + self.alpha))

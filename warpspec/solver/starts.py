@@ -218,7 +218,8 @@ class ImplicitFit(Start):
 
     def build(self, scene: Scene, ws: Workspace) -> StartOutcome:
         """Fit the implicit start into ``ws.phi``; ``keep`` holds the rays it accepts."""
-        fit = ImplicitStart(scene, ws.grid, ws.device, initial_plane(scene, ws.grid))
+        fit = ImplicitStart(scene, ws.grid, ws.device, initial_plane(scene, ws.grid),
+                            progress=ws.progress)
         report = fit.run(ws.phi)
         if not (report.distance and ws.band is not None):
             # a quadric's first-order distance needs none near the surface, where the band is

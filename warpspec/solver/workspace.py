@@ -84,6 +84,8 @@ class Workspace:
         self.owner_dist = self.redistancer.distance
         self.band = wp.zeros(grid.size, dtype=int, device=d) if band else None
         self.band_count = wp.zeros(1, dtype=int, device=d)
+        self.progress = None
+        """Called with a few words as each stage of a start begins (or ``None``)."""
         self.far_cap: float | None = None
         """Voxels beyond which a full redistance may clamp (set from the band's tracker)."""
         self.version = 0
