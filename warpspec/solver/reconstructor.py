@@ -383,7 +383,8 @@ class Reconstructor:
         """Whether the normals at the hits leave every half-space (about their mean).
 
         Then the data wraps past 180 degrees (a cylinder patch seen from a ring of cameras)
-        and the fit's extrapolation closes behind it: the crop is needed. Seen from one side,
+        and, unless it is seen all around (no arc of :data:`WRAP_GAP_DEG` without a normal),
+        the fit's extrapolation closes behind it: the crop is needed. Seen from one side,
         the open surface is kept whole: its rims lie beyond the data by the curvature between
         far-apart constraints, and a crop would cut into them (the wine bottle's label).
         """
@@ -393,9 +394,15 @@ class Reconstructor:
         origins, dirs = self.scene.rays()
         normals = self.scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
         mean = normals.sum(axis=0)
-        if not np.linalg.norm(mean) > 1e-9:
-            return True
-        return bool(np.min(normals @ (mean / np.linalg.norm(mean))) < 0.0)
+        if np.linalg.norm(mean) > 1e-9 and np.min(normals @ (mean / np.linalg.norm(mean))) >= 0:
+            return False  # one side
+        # Around what axis, and how far: the normals' largest empty arc in their principal
+        # plane. Seen all around (a bottle), the data leaves no such gap and the surface is
+        # kept whole; a patch past 180 degrees (the wrap) leaves one on its open side.
+        _, _, vt = np.linalg.svd(normals, full_matrices=False)
+        angles = np.sort(np.arctan2(normals @ vt[1], normals @ vt[0]))
+        gaps = np.diff(np.concatenate([angles, angles[:1] + 2.0 * np.pi]))
+        return bool(np.degrees(gaps.max()) > WRAP_GAP_DEG)
 
     @property
     def default_iterations(self) -> int:
@@ -443,6 +450,10 @@ class Reconstructor:
         return result
 
 
+WRAP_GAP_DEG = 90.0
+"""An open surface whose normals leave every half-space is cropped only when they also leave
+an arc this wide empty around it (a patch wrapping past 180 degrees, not a tube seen all
+around)."""
 CROP_MARGIN = 3.0 / 64.0
 """Margin of the crop of an open surface, as a share of the domain's longest side: three
 voxels at resolution 64. Wider keeps the back of a patch that wraps past 180 degrees (the
