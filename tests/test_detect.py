@@ -125,3 +125,15 @@ def test_a_streak_along_a_cylinder_is_one_highlight_at_its_centre():
     rows_found = detect_highlights(np.clip(img, 0, 1))
     assert len(rows_found) == 1
     assert np.hypot(rows_found[0, 0] - u0, rows_found[0, 1] - v0) < 0.1
+
+
+def test_the_model_beside_the_photographs_is_found(tmp_path):
+    """COLMAP's layout, DIR/images and DIR/sparse/0: detect uses that model by itself."""
+    from warpspec.cli import _model_beside
+
+    (tmp_path / "images").mkdir()
+    assert _model_beside([str(tmp_path / "images")]) is None
+    (tmp_path / "sparse" / "0").mkdir(parents=True)
+    (tmp_path / "sparse" / "0" / "cameras.txt").write_text("# no camera\n")
+    assert _model_beside([str(tmp_path / "images")]) == (tmp_path / "sparse" / "0").resolve()
+    assert _model_beside([str(tmp_path / "images"), str(tmp_path / "images")]) is None

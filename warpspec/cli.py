@@ -518,6 +518,25 @@ def _cmd_import_colmap(args: argparse.Namespace) -> int:
     return 0
 
 
+def _model_beside(images: Sequence[str]) -> Path | None:
+    """COLMAP's layout: the model of ``DIR/images`` in ``DIR/sparse/0`` or ``DIR/sparse``.
+
+    Only for one folder of photographs, and only when exactly one such model is there.
+    """
+    from .colmap import find_model
+
+    folders = [Path(p) for p in images if Path(p).is_dir()]
+    if len(folders) != 1 or len(images) != 1:
+        return None
+    parent = folders[0].resolve().parent
+    for candidate in (parent / "sparse",):
+        try:
+            return find_model(candidate)[0]
+        except InputError:
+            continue
+    return None
+
+
 def _cmd_detect(args: argparse.Namespace) -> int:
     import io
 
@@ -539,6 +558,10 @@ def _cmd_detect(args: argparse.Namespace) -> int:
         model = run_sfm(folders[0], args.sfm)
         if not args.quiet:
             _say(f"structure from motion: model in {model}")
+    if model is None and not args.no_model:
+        model = _model_beside(args.images)
+        if model is not None and not args.quiet:
+            _say(f"using the COLMAP model beside the photographs: {model} (--no-model: none)")
     observed = None if model is None else model_points(model)
     by_base: dict[str, list[str]] = {}
     if observed is not None:
@@ -733,7 +756,10 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--model", default=None, metavar="SPARSE_DIR",
                      help="COLMAP model of the photographs: a bright spot within "
                           "--exclude-radius of a 3D point seen in that image is tracked "
-                          "texture, not a highlight")
+                          "texture, not a highlight (default: the model beside a folder of "
+                          "photographs, DIR/sparse/0 or DIR/sparse for DIR/images, if any)")
+    det.add_argument("--no-model", action="store_true",
+                     help="do not look for a COLMAP model beside the photographs")
     det.add_argument("--sfm", default=None, metavar="WORKSPACE",
                      help="first run COLMAP's structure from motion (pycolmap: pip install "
                           "'warpspec[photos]') on the folder of photographs, into "
