@@ -1,21 +1,26 @@
 """The implicit start: any shape and topology, chosen from the data, solved coarse to fine.
 
-A smooth function ``f`` on the grid is fitted to the points (``f = 0``) and to the normals the
-reflection law demands where the specular rays meet its current zero set (``grad f = N``), with
-the Hessian energy of Smooth Signed Distance reconstruction as the smoothness; the rays are then
-intersected again and ``f`` refitted, a few rounds on each grid of a coarse-to-fine ladder
-(16, 32, ... up to the requested resolution), each level started from the one below. The depth of
-a highlight is unknown, so no value is asked of ``f`` at a ray's hit: the surface's offset comes
-from the points, its shape from the normals, carried across by the smoothness. Rays that miss
-the current surface pull it, weakly, toward where they pass nearest. Each ray's weight is
-refitted robustly (Tukey's biweight on the angle between ``grad f`` and ``N``), so a highlight
-whose normal cannot be met with the others (a false detection, another light's reflection) is
-rejected and reported instead of bending the surface. See docs/DESIGN.md, section "The start".
+1. A first guess from where the cameras stand: when they surround the data (no half-space
+   through the rays' convergence point holds them all), a sphere around that point through the
+   points; otherwise the paper's plane through the points, facing the cameras.
+2. A quadric fitted to the rays and points (:mod:`warpspec.quadric`). When it meets the
+   normals within noise it is the start: spheres, ellipsoids, cylinders, paraboloids.
+3. Otherwise a smooth function ``f`` on a coarse-to-fine ladder of grids (16, 32, ... up to
+   the requested resolution), fitted to the points (``f = 0``) and to the normals the
+   reflection law demands where the specular rays meet its current zero set (``grad f = N``),
+   with the Hessian energy of the correction to the quadric as the smoothness (Smooth Signed
+   Distance reconstruction); the rays are intersected again and ``f`` refitted, a few rounds on
+   each level, each level started from the one below. The depth of a highlight is unknown, so
+   no value is asked of ``f`` at a ray's hit: the surface's offset comes from the points, its
+   shape from the normals, carried across by the smoothness. Rays that miss the current
+   surface pull it, weakly, toward where they pass nearest.
+4. Each ray is weighed robustly (Tukey's biweight on the angle between ``grad f`` and ``N``);
+   a highlight whose normal cannot be met with the others (a false detection, another light's
+   reflection) is rejected and reported instead of bending the surface.
 
-The first guess needs no knob: where the cameras stand decides it. When they surround the
-data (no half-space through the rays' convergence point holds them all), a sphere around that
-point through the points; otherwise the paper's plane through the points, facing the cameras.
+See docs/DESIGN.md section 7.
 """
+
 
 from __future__ import annotations
 
