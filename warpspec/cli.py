@@ -528,13 +528,10 @@ def _model_beside(images: Sequence[str]) -> Path | None:
     folders = [Path(p) for p in images if Path(p).is_dir()]
     if len(folders) != 1 or len(images) != 1:
         return None
-    parent = folders[0].resolve().parent
-    for candidate in (parent / "sparse",):
-        try:
-            return find_model(candidate)[0]
-        except InputError:
-            continue
-    return None
+    try:
+        return find_model(folders[0].resolve().parent / "sparse")[0]
+    except InputError:
+        return None
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:

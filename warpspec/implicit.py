@@ -357,7 +357,7 @@ class ImplicitStart:
             self.quadric = initial
             self._quadric_field(self.grid, out)
             self.weights = enters.astype(float)
-        elif self._quadric_suffices():
+        elif self._quadric_suffices(enters):
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
         else:
@@ -428,14 +428,12 @@ class ImplicitStart:
         sigma = 1.4826 * float(np.median(self.residual[live]))
         return live & (self.residual > max(REJECT_SIGMAS * sigma, REJECT_DEG))
 
-    def _quadric_suffices(self) -> bool:
-        """Whether the quadric is the shape.
+    def _quadric_suffices(self, inside: np.ndarray) -> bool:
+        """Whether the quadric is the shape (``inside``: the rays that enter the domain).
 
         It must meet most normals within noise, the rest must be clearly false (far off, not
         a gradual falling away), and it must hold the points.
         """
-        _, _, inside = self.quadric.intersect(*self.scene.rays(), self.grid.origin,
-                                              self.grid.upper)
         if not inside.any():
             return False
         res = self.residual[inside]

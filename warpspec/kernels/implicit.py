@@ -282,10 +282,7 @@ def value_apply(
         return
     n = cell_of(f, origin, h, ys[s])
     fr = cell_fraction(f, origin, h, ys[s], n)
-    v = float(0.0)
-    for c in range(8):
-        q = corner_node(n, c)
-        v += corner_weight(fr, c) * f[q[0], q[1], q[2]]
+    v = trilinear(f, origin, h, ys[s])
     for c in range(8):
         q = corner_node(n, c)
         wp.atomic_add(out, q[0], q[1], q[2], w * corner_weight(fr, c) * v)
