@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from warpspec._parallel import SPLIT_MIN
 from warpspec.geometry import plane_frame
 from warpspec.grid import Grid
 from warpspec.initial import HeightFit, monomials
@@ -252,9 +253,11 @@ def test_point_decay_is_exact(device):
     np.testing.assert_allclose(out.numpy(), phi0 * np.exp(-w * gauss * dt), rtol=2e-6, atol=1e-7)
 
 
-@pytest.mark.parametrize("shape", [(9, 7, 5), (3, 1030, 4)], ids=["bit-packed", "linear"])
+@pytest.mark.parametrize("shape", [(9, 7, 5), (3, 1030, 4), (40, 40, 60)],
+                         ids=["bit-packed", "linear", "two-threads"])
 def test_band_step_equals_the_dense_step_on_the_band_and_leaves_the_rest(device, shape):
-    # (3, 1030, 4) is too wide to bit-pack a node: the band stores linear indices instead
+    # (3, 1030, 4) is too wide to bit-pack a node: the band stores linear indices instead;
+    # (40, 40, 60) has more band nodes than SPLIT_MIN: two CPU threads take half each
     rng = np.random.default_rng(3)
     phi0 = rng.normal(size=shape).astype(np.float32)
     gauss = rng.uniform(0, 2, size=shape).astype(np.float32)
@@ -266,6 +269,8 @@ def test_band_step_equals_the_dense_step_on_the_band_and_leaves_the_rest(device,
     launch_build_band(phi, band, count, width=0.5)
     inside = np.abs(phi0) <= 0.5
     assert count.numpy()[0] == inside.sum()
+    if phi0.size > 40_000:
+        assert inside.sum() > SPLIT_MIN
     weights = dict(spacing=0.1, dt=1e-3, alpha=0.3, point_weight=5.0)
     dense = wp.zeros(shape, dtype=float, device=device)
     launch_flow_step(phi, owner, normals, to_device(gauss, device), dense, **weights)

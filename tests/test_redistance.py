@@ -146,6 +146,36 @@ def test_serial_and_planes_agree(device):
     np.testing.assert_allclose(serial, planes, rtol=0, atol=1e-6)
 
 
+def _two_spheres_and_a_slab(n: int) -> tuple[float, np.ndarray]:
+    h, xyz = _nodes(n)
+    d = np.minimum(np.linalg.norm(xyz - [0.3, 0.4, 0.5], axis=-1) - 0.2,
+                   np.linalg.norm(xyz - [0.7, 0.6, 0.45], axis=-1) - 0.18)
+    d = np.minimum(d, np.abs(xyz[..., 2] - 0.9) - 0.03)
+    return h, (d * (1.0 + 0.3 * np.cos(5.0 * xyz[..., 1]))).astype(np.float32)
+
+
+def test_split_sweeps_bound_the_converged_distance_and_match_serial_near_the_surface():
+    # two threads, one per direction of the third axis, then the smaller value: the same
+    # distances as the serial sweeps next to the zero set; beyond, an upper bound of the
+    # converged distance within a few percent, off only at the medial surfaces where the
+    # nearest zero set lies up the third axis on one side and down it on the other
+    for shape in ("sphere", "blobs"):
+        if shape == "sphere":
+            h, phi, _ = _sphere(48)
+        else:
+            h, phi = _two_spheres_and_a_slab(48)
+        split = np.abs(redistance(phi, h, device="cpu", method="split"))
+        serial = np.abs(redistance(phi, h, device="cpu", method="serial"))
+        converged = np.abs(redistance(phi, h, device="cpu", method="serial", passes=3))
+        near = converged < 3 * h
+        assert np.abs(split - serial)[near].max() < 1e-4 * h
+        assert (split >= converged - 1e-5 * h).all()
+        excess = (split - converged) / np.maximum(converged, h)
+        assert excess.max() < 0.05
+        if shape == "sphere":  # one convex surface: no medial surface, no difference
+            assert np.abs(split - serial).max() < 1e-4 * h
+
+
 def test_scaled_plane_is_restored_to_exact_distance(device):
     n = 40
     h, xyz = _nodes(n)
@@ -181,7 +211,8 @@ def test_reinitialize_leaves_phi_without_crossing_unchanged(device):
 
 def test_reinitialize_replays_from_a_captured_graph(device):
     h, phi, _ = _sphere(24)
-    rd = Redistancer(phi.shape, h, device)
+    # a capture sweeps in one thread (the split method's second thread is not captured)
+    rd = Redistancer(phi.shape, h, device, method="serial" if "cpu" in str(device) else "auto")
     direct = wp.array(phi, dtype=float, device=device)
     rd.reinitialize(direct)
     field = wp.array(3.0 * phi, dtype=float, device=device)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from .._parallel import launch_halves
 from .band import band_slot
 from .stencils import central_gradient, curvature_term, unit_normal
 
@@ -140,6 +141,7 @@ def flow_step_band(
     gauss: wp.array3d[float],
     band: wp.array[int],
     count: wp.array[int],
+    first: int,
     h: float,
     dt: float,
     normal_weight: float,
@@ -147,8 +149,12 @@ def flow_step_band(
     point_weight: float,
     out: wp.array3d[float],
 ):
-    """The flow step on the nodes of a narrow band only (``band[:count[0]]``, see build_band)."""
-    n = band_slot(band, count, wp.tid(), 0, wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
+    """The flow step on the nodes of a narrow band only (``band[:count[0]]``, see build_band).
+
+    Thread ``t`` takes slot ``first + t``.
+    """
+    n = band_slot(band, count, first + wp.tid(), 0,
+                  wp.vec3i(phi.shape[0], phi.shape[1], phi.shape[2]))
     if n[0] < 0:
         return
     out[n[0], n[1], n[2]] = advance(phi, owner, normals, gauss, n[0], n[1], n[2], h, dt,
@@ -217,8 +223,9 @@ def launch_flow_step_band(
         band: The band's nodes, as :func:`launch_build_band` encodes them.
         count: One int, the number of valid entries of ``band``.
         out: Destination; nodes outside the band are not written.
-        size: Threads to launch: the band's size when known on the host (CPU), else the
-            capacity of ``band`` (threads past ``count`` return at once; graph-capturable).
+        size: Threads to launch: the band's size when known on the host (CPU, where two
+            cores share it), else the capacity of ``band`` (threads past ``count`` return at
+            once; graph-capturable).
         spacing: Grid spacing ``h``.
         dt: Time step.
         normal_weight: Weight of the normal term.
@@ -227,11 +234,14 @@ def launch_flow_step_band(
     """
     if size == 0:
         return
-    wp.launch(
-        flow_step_band,
-        dim=size,
-        inputs=[phi, owner, normals, gauss, band, count, float(spacing), float(dt),
-                float(normal_weight), float(alpha), float(point_weight)],
-        outputs=[out],
-        device=phi.device,
-    )
+    def launch(first: int, threads: int, _half: int) -> None:
+        wp.launch(
+            flow_step_band,
+            dim=threads,
+            inputs=[phi, owner, normals, gauss, band, count, first, float(spacing), float(dt),
+                    float(normal_weight), float(alpha), float(point_weight)],
+            outputs=[out],
+            device=phi.device,
+        )
+
+    launch_halves(launch, size, phi.device)

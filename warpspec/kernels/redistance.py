@@ -6,6 +6,14 @@ one node update (:func:`_visit`):
 
 - ``serial``: one thread does the 8 Gauss-Seidel sweeps of Zhao (2005) in order; the fastest on
   the CPU backend, which runs a launch serially anyway.
+- ``split``: two CPU threads at once on two copies, one sweeping the 4 orderings that run up
+  the third axis and one the 4 that run down it; each node then takes the smaller value. A
+  distance's characteristics are straight lines from the nearest surface point, so each node
+  is reached by one of the two, and both cores work: about 1.6 times faster than ``serial``.
+  The result is an upper bound of the converged distance that equals the serial one next to
+  the surface; only at a medial surface where the nearest zero set lies up the third axis on
+  one side and down it on the other can it exceed the serial one (a few percent of the
+  distance there, tested).
 - ``planes``: the parallel sweeps of Detrixhe, Gibou and Min (2013): for each of the 8
   orderings, one launch per plane ``i' + j' + k' = L`` of the ordering's flipped coordinates.
   A node's update reads only its 6 axis neighbours; the 3 upwind ones lie on plane ``L - 1``
@@ -23,8 +31,12 @@ update.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
+
 import warp as wp
 
+from .._parallel import cpu_cores, launch_halves, run_pair
 from ..errors import InputError
 from .band import band_slot
 
@@ -38,7 +50,7 @@ BIG = wp.constant(1.0e30)
 BAND_MODES = {"axis": 0, "gradient": 1}
 """Band initialisations accepted by :class:`Redistancer` and their kernel codes."""
 
-METHODS = ("auto", "serial", "planes")
+METHODS = ("auto", "serial", "split", "planes")
 """Sweep methods accepted by :class:`Redistancer`."""
 
 BAND_PASSES = 4
@@ -295,6 +307,7 @@ def _band_distance(phi: wp.array3d[float], i: int, j: int, k: int, mode: int) ->
 
 @wp.kernel
 def init_band_kernel(
+    i0: int,
     phi: wp.array3d[float],
     mode: int,
     chunk: int,
@@ -309,6 +322,7 @@ def init_band_kernel(
     frozen nodes, the only ones that the first sweep can change.
     """
     i, j, kb = wp.tid()
+    i = i + i0
     frozen = wp.int32(0)
     for c in range(chunk):
         k = kb * chunk + c
@@ -334,13 +348,15 @@ def _is_frozen(flags: wp.array3d[wp.uint8], i: int, j: int, k: int) -> int:
 
 
 @wp.kernel
-def activate_front_kernel(chunk: int, flags: wp.array3d[wp.uint8], rows: wp.array2d[wp.uint8]):
+def activate_front_kernel(
+    i0: int,chunk: int, flags: wp.array3d[wp.uint8], rows: wp.array2d[wp.uint8]):
     """Mark active the unfrozen nodes with a frozen axis neighbour, and their rows ``(i, j)``.
 
     Every other node starts at the same value as all its neighbours, so its first update could
     not lower it: waking only this front gives the sweeps exactly the same updates.
     """
     i, j, kb = wp.tid()
+    i = i + i0
     nx = flags.shape[0]
     ny = flags.shape[1]
     nz = flags.shape[2]
@@ -377,19 +393,23 @@ def serial_sweep_kernel(
     rows: wp.array[wp.uint8],
     shape: wp.vec3i,
     passes: int,
+    first: int,
+    orders: int,
 ):
-    """The 8 Gauss-Seidel sweeps of the distance, ``passes`` times, in one thread (the CPU).
+    """Gauss-Seidel sweeps of the distance in one thread (the CPU).
 
-    The same updates in the same order as :func:`sweep_kernel` (so the same numbers) on
-    flattened arrays: a neighbour is an offset (no index arithmetic per read), and a row
-    ``(i, j)`` whose ``rows`` byte is clear holds no active node and is skipped whole.
+    Orderings ``first`` to ``first + orders - 1`` (of the 8), ``passes`` times. With all 8
+    orderings, the same updates in the same order as :func:`sweep_kernel` (so the same
+    numbers) on flattened arrays: a neighbour is an offset (no index arithmetic per read),
+    and a row ``(i, j)`` whose ``rows`` byte is clear holds no active node and is skipped
+    whole.
     """
     nx = shape[0]
     ny = shape[1]
     nz = shape[2]
     sx = ny * nz
-    for step in range(8 * passes):
-        o = step % 8
+    for step in range(orders * passes):
+        o = first + step % orders
         for a in range(nx):
             i = a
             if o & 1:
@@ -506,24 +526,37 @@ def sweep_kernel(
 
 @wp.kernel
 def apply_sign_kernel(
+    i0: int,
     d: wp.array3d[float],
+    twin: wp.array3d[float],
     flags: wp.array3d[wp.uint8],
     count: wp.array[wp.int32],
     h: float,
     chunk: int,
     phi: wp.array3d[float],
 ):
-    """Write the signed distance back into phi; leave phi unchanged if nothing was frozen."""
+    """Write the signed distance, the smaller of ``d`` and ``twin``, back into phi.
+
+    ``twin`` is ``d`` itself unless the sweeps were split between two threads. ``phi`` is
+    left unchanged if nothing was frozen.
+    """
     i, j, kb = wp.tid()
+    i = i + i0
     if count[0] == 0:
         return
     for c in range(chunk):
         k = kb * chunk + c
         if k < phi.shape[2]:
-            v = d[i, j, k] * h
+            v = wp.min(d[i, j, k], twin[i, j, k]) * h
             if int(flags[i, j, k]) & _INSIDE:
                 v = -v
             phi[i, j, k] = v
+
+
+@wp.kernel
+def add_count_kernel(src: wp.array[wp.int32], dst: wp.array[wp.int32]):
+    """Add one counter into another (the two halves' counts of a split launch)."""
+    dst[0] = dst[0] + src[0]
 
 
 @wp.kernel
@@ -592,10 +625,14 @@ def band_sign_kernel(
     count: wp.array[int],
     frozen: wp.array[wp.int32],
     h: float,
+    first: int,
     phi: wp.array3d[float],
 ):
-    """Write the signed distance back into the band's nodes (nothing if nothing was frozen)."""
-    s = wp.tid()
+    """Write the signed distance back into the band's nodes (nothing if nothing was frozen).
+
+    Thread ``t`` takes slot ``first + t``.
+    """
+    s = first + wp.tid()
     if frozen[0] == 0:
         return
     n = band_slot(band, count, s, 0, wp.vec3i(d.shape[0], d.shape[1], d.shape[2]))
@@ -665,9 +702,12 @@ class Redistancer:
         shape: Number of nodes along each axis.
         spacing: Node spacing ``h`` in world units.
         device: Warp device (or its name) to run on.
-        method: ``"serial"`` (one thread sweeps, fastest on the CPU), ``"planes"`` (parallel
-            sweeps over the planes ``i + j + k = const``, for CUDA) or ``"auto"`` (serial on a
-            CPU device, planes on CUDA).
+        method: ``"serial"`` (one thread sweeps), ``"split"`` (two CPU threads, one for the
+            4 orderings that run up the third axis and one for the 4 that run down it, on two
+            copies, then the smaller value of each node: about twice as fast on two cores),
+            ``"planes"`` (parallel sweeps over the planes ``i + j + k = const``, for CUDA) or
+            ``"auto"`` (planes on CUDA; on the CPU, split where the process has two cores,
+            else serial).
         band: How the nodes next to a sign change get their distance: ``"axis"`` (the linear
             zero crossing along each axis, combined as ``1 / sqrt(sum 1 / d_axis^2)``) or
             ``"gradient"`` (``|phi| / |grad phi|`` with central differences, one-sided at the
@@ -706,7 +746,12 @@ class Redistancer:
         self.band = band
         self.passes = int(passes)
         if method == "auto":
-            method = "planes" if self.device.is_cuda else "serial"
+            if self.device.is_cuda:
+                method = "planes"
+            else:
+                method = "split" if cpu_cores() >= 2 else "serial"
+        if method == "split" and self.device.is_cuda:
+            raise InputError("method: 'split' runs on the CPU only; use 'planes' on CUDA")
         self.method = method
         # element-wise kernels: a whole row of k per thread on the CPU, one node on CUDA
         self._chunk = 1 if self.device.is_cuda else shape[2]
@@ -717,6 +762,11 @@ class Redistancer:
         """Scratch: inside, frozen and active bits per node."""
         self._active_rows = wp.zeros(shape[:2], dtype=wp.uint8, device=self.device)
         # per row (i, j): may hold an active node (the serial distance sweeps skip the others)
+        if method == "split":  # the second thread's copy of the distance, flags and rows
+            self._twin = (wp.empty(shape, dtype=float, device=self.device),
+                          wp.empty(shape, dtype=wp.uint8, device=self.device),
+                          wp.zeros(shape[:2], dtype=wp.uint8, device=self.device))
+        self._count_b = wp.zeros(1, dtype=wp.int32, device=self.device)  # the second half's
         self.band_count = wp.zeros(1, dtype=wp.int32, device=self.device)
         """Number of band nodes found by the last :meth:`reinitialize` (0: no zero crossing)."""
         # the nearest-point index of point_distance shares the memory of `distance`
@@ -765,25 +815,55 @@ class Redistancer:
         if array.dtype != wp.float32:
             raise InputError(f"{name}: expected float32, got {array.dtype.__name__}")
 
-    def _sweep(self, pts: PointSet) -> None:
+    def _launch_rows(self, kernel: wp.Kernel, args: Callable[[int], list]) -> None:
+        """Launch a kernel over the rows ``(i, j, block of k)``, its first argument ``i0``.
+
+        On the CPU two threads take half the ``i`` each; ``args(half)`` gives the rest of the
+        arguments for half 0 or 1.
+        """
+        def launch(first: int, count: int, half: int) -> None:
+            wp.launch(kernel, dim=(count, self._rows[1], self._rows[2]),
+                      inputs=[first, *args(half)], device=self.device)
+
+        launch_halves(launch, self.shape[0], self.device, nodes=math.prod(self.shape))
+
+    def _serial_sweeps(self, distance: wp.array, flags: wp.array, rows: wp.array, *,
+                       passes: int, first: int = 0, orders: int = 8) -> None:
+        wp.launch(
+            serial_sweep_kernel,
+            dim=1,
+            inputs=[distance.flatten(), flags.flatten(), rows.flatten(),
+                    wp.vec3i(*self.shape), passes, first, orders],
+            device=self.device,
+        )
+
+    def _sweep(self, pts: PointSet) -> wp.array:
+        """Run the sweeps; returns the array whose minimum with :attr:`distance` is the result."""
         mode = 0 if pts is self._no_points else 1
-        if self.method == "serial" and mode == 0:
-            wp.launch(
-                serial_sweep_kernel,
-                dim=1,
-                inputs=[self.distance.flatten(), self.flags.flatten(),
-                        self._active_rows.flatten(), wp.vec3i(*self.shape), self.passes],
-                device=self.device,
+        if (self.method == "split" and mode == 0 and self.passes == 1
+                and not self.device.is_capturing):  # a worker thread's launch is not captured
+            twin = self._twin
+            for copy, original in zip(twin, (self.distance, self.flags, self._active_rows),
+                                      strict=True):
+                wp.copy(copy, original)
+            run_pair(
+                lambda: self._serial_sweeps(self.distance, self.flags, self._active_rows,
+                                            passes=1, first=0, orders=4),
+                lambda: self._serial_sweeps(*twin, passes=1, first=4, orders=4),
             )
-            return
-        if self.method == "serial":
+            return twin[0]
+        if self.method in ("serial", "split") and mode == 0:
+            self._serial_sweeps(self.distance, self.flags, self._active_rows,
+                                passes=self.passes)
+            return self.distance
+        if self.method in ("serial", "split"):
             wp.launch(
                 sweep_kernel,
                 dim=(1, 1),
                 inputs=[self.distance, self.flags, pts, mode, self.passes, 0, -1, 0, 0],
                 device=self.device,
             )
-            return
+            return self.distance
         if pts is not self._points:
             # rebind the recorded launches (host-side only)
             for launch in self._plane_launches:
@@ -793,6 +873,7 @@ class Redistancer:
         for _ in range(self.passes):
             for launch in self._plane_launches:
                 launch.launch()
+        return self.distance
 
     def reinitialize(self, phi: wp.array3d, *, cap: float | None = None) -> wp.array:
         """Reset ``phi`` in place to the signed distance to its zero set.
@@ -829,29 +910,20 @@ class Redistancer:
         else:
             raise InputError(f"cap: must be a positive number of voxel widths, got {cap!r}")
         self.band_count.zero_()
+        self._count_b.zero_()
         self._active_rows.zero_()
-        wp.launch(
-            init_band_kernel,
-            dim=self._rows,
-            inputs=[phi, BAND_MODES[self.band], self._chunk, start],
-            outputs=[self.distance, self.flags, self.band_count],
-            device=self.device,
-        )
-        wp.launch(
-            activate_front_kernel,
-            dim=self._rows,
-            inputs=[self._chunk],
-            outputs=[self.flags, self._active_rows],
-            device=self.device,
-        )
-        self._sweep(self._no_points)
-        wp.launch(
-            apply_sign_kernel,
-            dim=self._rows,
-            inputs=[self.distance, self.flags, self.band_count, self.spacing, self._chunk],
-            outputs=[phi],
-            device=self.device,
-        )
+        counts = (self.band_count, self._count_b)
+        self._launch_rows(init_band_kernel,
+                          lambda half: [phi, BAND_MODES[self.band], self._chunk, start,
+                                        self.distance, self.flags, counts[half]])
+        wp.launch(add_count_kernel, dim=1, inputs=[self._count_b, self.band_count],
+                  device=self.device)
+        self._launch_rows(activate_front_kernel,
+                          lambda half: [self._chunk, self.flags, self._active_rows])
+        twin = self._sweep(self._no_points)
+        self._launch_rows(apply_sign_kernel,
+                          lambda half: [self.distance, twin, self.flags, self.band_count,
+                                        self.spacing, self._chunk, phi])
         return self.band_count
 
     def reinitialize_band(
@@ -903,9 +975,12 @@ class Redistancer:
             wp.launch(band_sweep_kernel, dim=size,
                       inputs=[self.distance, self.flags, band, count, p % 2],
                       device=self.device)
-        wp.launch(band_sign_kernel, dim=size,
-                  inputs=[self.distance, self.flags, band, count, self.band_count,
-                          self.spacing], outputs=[phi], device=self.device)
+        launch_halves(
+            lambda first, threads, _half: wp.launch(
+                band_sign_kernel, dim=threads,
+                inputs=[self.distance, self.flags, band, count, self.band_count,
+                        self.spacing, first], outputs=[phi], device=self.device),
+            size, self.device)
         return self.band_count
 
     def point_distance(
