@@ -16,7 +16,10 @@
    surface pull it, weakly, toward where they pass nearest.
 4. Each ray is weighed robustly (Tukey's biweight on the angle between ``grad f`` and ``N``);
    a highlight whose normal cannot be met with the others (a false detection, another light's
-   reflection) is rejected and reported instead of bending the surface.
+   reflection) is rejected and reported instead of bending the surface. A supple fit follows
+   a false normal too, so rejection is decided by robust passes on the coarse levels, stiff to
+   supple (:data:`ROBUST_SMOOTHNESS`); a rejected ray that the final fit, made without it,
+   meets after all comes back.
 
 See docs/DESIGN.md section 7.
 """
@@ -52,12 +55,19 @@ are further off; a shape that is not a quadric falls away gradually),..."""
 QUADRIC_POINT_VOXELS = 0.25
 """...and every point lies within this many voxel widths of it."""
 REJECT_DEG = 10.0
-"""A ray whose normal the first, soft grid fit misses by more than this, and by more than
-REJECT_SIGMAS robust standard deviations of all rays' misses, is rejected as false."""
+"""A ray whose normal a robust pass misses by more than this, and by more than REJECT_SIGMAS
+robust standard deviations of the kept rays' misses, is rejected as false."""
 REJECT_SIGMAS = 4.0
+RETURN_DEG = 15.0
+"""A rejected ray comes back when the final fit, made without it, meets its normal this closely
+(or within the kept rays' threshold): a miss out of sample is larger than one in sample."""
 LIMIT_DEG = 30.0
 """Smallest Tukey limit of the grid fit's soft robust weights: the fit cannot follow every
 legitimate normal before it has converged, so only normals this far off lose all weight."""
+ROBUST_SMOOTHNESS = (10.0, 5.0, 2.5, 1.2, 0.6, 0.2)
+"""Smoothness (as SMOOTHNESS) of the robust passes, stiff to supple, on the levels up to
+ROBUST_TOP."""
+ROBUST_TOP = 32
 ROUNDS_COARSE = 4
 """Intersect-and-refit rounds on each coarse level."""
 ROUNDS_FINE = 2
@@ -66,6 +76,8 @@ CG_ITERATIONS = 200
 """Conjugate-gradient iterations of one fit on a coarse level, at most."""
 CG_ITERATIONS_FINE = 50
 """Conjugate-gradient iterations of one fit on the requested grid, at most."""
+CG_BLOCK = 10
+"""Conjugate-gradient iterations between two checks of the residual (one graph replay)."""
 CG_TOLERANCE = 1e-5
 """Stop a fit when the residual norm has fallen by this factor."""
 SMOOTHNESS = 0.002
@@ -187,7 +199,7 @@ class FitReport:
 class _Level:
     """The device arrays of one level of the ladder and its fit."""
 
-    def __init__(self, grid: Grid, device) -> None:
+    def __init__(self, grid: Grid, device, *, smoothness: float = SMOOTHNESS) -> None:
         self.grid = grid
         self.device = device
         shape = grid.shape
@@ -211,16 +223,21 @@ class _Level:
         self.mixed = wp.zeros(shape, dtype=wp.vec3, device=d)
         self.scalars = wp.zeros(4, dtype=wp.float64, device=d)
         # the Hessian energy per unit of the domain's length: lam = SMOOTHNESS * h / L
-        self.lam = SMOOTHNESS / float(max(grid.shape) - 1)
+        self.lam = smoothness / float(max(grid.shape) - 1)
         self.eps = PROXIMITY
         self.prior_term = wp.zeros(shape, dtype=float, device=d)
+        self._flat: dict[int, wp.array] = {}
 
     def to_grid(self, x: np.ndarray) -> np.ndarray:
         """World points in this level's voxels."""
         return (np.asarray(x, dtype=np.float64) - self.world_origin) / self.world_h
 
     def flat(self, a: wp.array) -> wp.array:
-        return a.reshape((self.count,))
+        """``a`` as one dimension (the view is made once per array)."""
+        view = self._flat.get(a.ptr)
+        if view is None:
+            view = self._flat[a.ptr] = a.reshape((self.count,))
+        return view
 
     def apply(self, x: wp.array, out: wp.array, grads, values) -> None:
         """``out = A x``."""
@@ -281,7 +298,31 @@ class _Level:
         if not rr0 > 0.0:
             return 0
         done = 0
-        for it in range(1, iterations + 1):
+        graph = None
+        while done < iterations:
+            block = min(CG_BLOCK, iterations - done)
+            if block == CG_BLOCK:
+                # a block of iterations as one Warp graph: replaying it costs a fraction of
+                # the launches' own overhead, which dominates on the coarse levels
+                if graph is None:
+                    with wp.ScopedCapture(device=d) as capture:
+                        self._cg_iterations(block, grads, values)
+                    graph = capture.graph
+                wp.capture_launch(graph)
+            else:
+                self._cg_iterations(block, grads, values)
+            done += block
+            rr = float(self.scalars.numpy()[K.CG_SLOTS["rr"]])
+            if rr <= (CG_TOLERANCE**2) * rr0:
+                break
+        return done
+
+    def _cg_iterations(self, count: int, grads, values) -> None:
+        """Launch ``count`` Jacobi-preconditioned CG iterations (scalars on the device)."""
+        d = self.device
+        n = self.count
+        chunks = (n + K.REDUCE_CHUNK - 1) // K.REDUCE_CHUNK
+        for _ in range(count):
             wp.launch(K.cg_clear, dim=1, inputs=[self.scalars], device=d)
             self.apply(self.p, self.ap, grads, values)
             wp.launch(K.cg_dot, dim=chunks, inputs=[self.flat(self.p), self.flat(self.ap), n],
@@ -294,12 +335,6 @@ class _Level:
                       inputs=[self.flat(self.r), self.flat(self.inv_diag), n, self.scalars],
                       outputs=[self.flat(self.p)], device=d)
             wp.launch(K.cg_shift, dim=1, inputs=[self.scalars], device=d)
-            done = it
-            if it % 10 == 0:
-                rr = float(self.scalars.numpy()[K.CG_SLOTS["rr"]])
-                if rr <= (CG_TOLERANCE**2) * rr0:
-                    break
-        return done
 
 
 class ImplicitStart:
@@ -370,15 +405,24 @@ class ImplicitStart:
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))
             ladder = level_ladder(max(self.grid.shape) - 1)
-            # First pass: every ray, soft robust weights. Then the rays whose normals the fit
-            # cannot meet are rejected, and the ladder is fitted again without them: a false
-            # highlight keeps some weight in a soft fit, and none after.
+            # Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
+            # normals it misses by far more than the others'; a stiff fit cannot bend to a
+            # false normal, and a supple one no longer feels those already gone. Then the
+            # whole ladder without them, and the rejected rays whose normals that fit meets
+            # after all (a stiff pass also misses a sharp but true bend) come back.
             self.excluded = np.zeros(self.m, dtype=bool)
+            coarse = [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
+            for smoothness in ROBUST_SMOOTHNESS:
+                self._ladder(coarse, [], [], smoothness=smoothness)
+                self.excluded |= self._outliers()
             previous = self._ladder(ladder, rounds, cg)
-            outliers = self._outliers()
-            if outliers.any():
-                self.excluded = outliers
-                previous = self._ladder(ladder, rounds, cg)
+            if self.excluded.any():
+                self._anchor(previous)
+                self._update_weights(previous)
+                back = self.excluded & (self.residual <= max(self._threshold(), RETURN_DEG))
+                if back.any():
+                    self.excluded &= ~back
+                    previous = self._ladder(ladder, rounds, cg)
             self._anchor(previous)
             self._update_weights(previous)
             self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
@@ -390,16 +434,18 @@ class ImplicitStart:
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
                          cg_iterations=cg, distance=not ladder)
 
-    def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
+    def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
+                smoothness: float = SMOOTHNESS) -> _Level:
         """Fit on every level of the ladder, each started from the one below."""
         lo, hi = self.grid.origin, self.grid.upper
         previous: _Level | None = None
         self.weights = np.where(self.excluded, 0.0, 1.0)
         for index, res in enumerate(ladder):
             last = index == len(ladder) - 1
-            grid = self.grid if last else Grid.from_bounds(lo, hi, resolution=res)
+            grid = self.grid if res == max(self.grid.shape) - 1 else Grid.from_bounds(
+                lo, hi, resolution=res)
             self._say(f"grid {res} of {', '.join(map(str, ladder))}")
-            level = _Level(grid, self.device)
+            level = _Level(grid, self.device, smoothness=smoothness)
             self._use_level_rays(level)
             self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
             level.set_prior(level.p)
@@ -421,12 +467,24 @@ class ImplicitStart:
             self.progress(text)
 
     def _outliers(self) -> np.ndarray:
-        """Rays whose normal the soft fit misses by more than noise allows."""
-        live = (self.kind.numpy() != K.ANCHOR_NONE)
+        """Rays whose normal the fit misses by more than the others' spread allows.
+
+        Sigma clipping: the spread is the robust standard deviation (1.4826 times the median
+        miss) of the rays not yet clipped, recomputed after each clip until none is added.
+        """
+        live = (self.kind.numpy() != K.ANCHOR_NONE) & ~self.excluded
+        return live & (self.residual > self._threshold())
+
+    def _threshold(self) -> float:
+        """The largest normal miss (degrees) of a kept ray.
+
+        REJECT_SIGMAS robust standard deviations of the kept rays' misses, at least REJECT_DEG.
+        """
+        live = (self.kind.numpy() != K.ANCHOR_NONE) & ~self.excluded
         if not live.any():
-            return np.zeros(self.m, dtype=bool)
+            return math.inf
         sigma = 1.4826 * float(np.median(self.residual[live]))
-        return live & (self.residual > max(REJECT_SIGMAS * sigma, REJECT_DEG))
+        return max(REJECT_SIGMAS * sigma, REJECT_DEG)
 
     def _quadric_suffices(self, inside: np.ndarray) -> bool:
         """Whether the quadric is the shape (``inside``: the rays that enter the domain).
