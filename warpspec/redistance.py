@@ -112,8 +112,10 @@ def redistance(
     # In voxel widths: the distance scales with phi and h together, so the float32 sweeps see
     # the same numbers whatever the units. Values beyond VOXEL_CLIP voxels only say which side
     # a node is on (no grid is that wide), so they are clipped rather than overflowing.
+    # (float32 input stays in float32: a quotient that overflows is clipped all the same)
+    work = np.float32 if arr.dtype == np.float32 else np.float64
     with np.errstate(over="ignore", under="ignore"):
-        vox = np.clip(arr.astype(np.float64) / h, -VOXEL_CLIP, VOXEL_CLIP)
+        vox = np.clip(arr / work(h), -VOXEL_CLIP, VOXEL_CLIP)
     phi32 = np.ascontiguousarray(vox, dtype=np.float32)
     negative = phi32 < 0.0
     if not (negative.any() and not negative.all()) and not np.any(phi32 == 0.0):
@@ -126,7 +128,7 @@ def redistance(
     field = wp.array(phi32, dtype=float, device=dev, copy=True)
     rd.reinitialize(field, cap=None if cap is None else cap / h)
     with np.errstate(over="ignore"):
-        out = np.array(field.numpy().astype(np.float64) * h, dtype=arr.dtype)
+        out = np.asarray(field.numpy().astype(work) * work(h), dtype=arr.dtype)
     if not np.all(np.isfinite(out)):
         raise InputError(
             f"spacing: distances of up to {float(np.max(np.abs(field.numpy()))) * h:.3g} do "
