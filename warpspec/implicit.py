@@ -35,7 +35,8 @@ import numpy as np
 import warp as wp
 
 from . import quadric as Q
-from .geometry import LIGHT_POINT, plane_frame
+from . import torus as T
+from .geometry import LIGHT_CAMERA, LIGHT_POINT, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
 
@@ -368,6 +369,8 @@ class ImplicitStart:
         codes, vectors = scene.ray_lights()
         self._rays = (origins, dirs, codes, vectors)
         self._level_rays = None
+        self.torus: T.Torus | None = None
+        """The ring torus taken as the start, when one was."""
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -395,6 +398,13 @@ class ImplicitStart:
         elif self._quadric_suffices(enters):
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
+        elif (torus := self._torus(guess)) is not None:
+            self.torus = t = torus
+            start = np.asarray(self.grid.origin, dtype=np.float64) - t.centre
+            wp.launch(K.torus_field, dim=self.grid.shape,
+                      inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
+                              wp.vec3(*(float(v) for v in t.axis)), float(t.R), float(t.r)],
+                      outputs=[out], device=self.device)
         else:
             if guess.kind == "plane" and self.quadric.sheets_crossed(
                     *self.scene.rays(), lo, hi) > 1:
@@ -504,6 +514,42 @@ class ImplicitStart:
             within &= float(dist.max()) * self.quadric.scale <= QUADRIC_POINT_VOXELS * \
                 self.grid.spacing
         return bool(within)
+
+    def _torus(self, guess: Guess) -> T.Torus | None:
+        """A ring torus that meets the normals as a quadric start must, or ``None``.
+
+        Tried only when the cameras stand all around and at least :data:`T.MIN_RAYS` rays are
+        flash-lit (normal lines, which a torus' all cross its core circle). Sets the rays'
+        residuals and weights (the rays it misses by more than REJECT_DEG are rejected).
+        """
+        if guess.kind != "sphere":
+            return None
+        origins, dirs, codes, _ = self._rays
+        flash = codes == LIGHT_CAMERA
+        if int(flash.sum()) < T.MIN_RAYS:
+            return None
+        lo, hi = self.grid.origin, self.grid.upper
+        torus = T.fit_torus(origins[flash], dirs[flash], self.scene.points.reshape(-1, 3),
+                            scale=float(np.max(hi - lo)))
+        if torus is None:
+            return None
+        hits, inside = torus.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
+        if not inside.any():
+            return None
+        g = torus.gradient(hits)
+        n = self.scene.normals(hits)
+        cos = np.clip(np.einsum("ij,ij->i", g, n), -1.0, 1.0)
+        residual = np.where(inside, np.degrees(np.arccos(cos)), 180.0)
+        res = residual[inside]
+        ok = np.mean(res <= QUADRIC_DEG) >= QUADRIC_SHARE
+        ok &= np.mean((res > QUADRIC_DEG) & (res <= REJECT_DEG)) <= QUADRIC_AMBIGUOUS
+        pts = self.scene.points.reshape(-1, 3)
+        ok &= float(np.abs(torus.value(pts)).max()) <= QUADRIC_POINT_VOXELS * self.grid.spacing
+        if not ok:
+            return None
+        self.residual = residual
+        self.weights = (inside & (residual <= REJECT_DEG)).astype(float)
+        return torus
 
     def _quadric_field(self, grid: Grid, out: wp.array, *, unit: float = 1.0) -> None:
         """The quadric's first-order distance on ``grid``, in units of ``unit``."""

@@ -568,3 +568,18 @@ def scaled_copy(src: wp.array3d[float], factor: float, dst: wp.array3d[float]):
     """``dst = factor * src`` (a field in one level's voxels into world units)."""
     i, j, k = wp.tid()
     dst[i, j, k] = factor * src[i, j, k]
+
+
+@wp.kernel
+def torus_field(start: wp.vec3, step: float, axis: wp.vec3, major: float, minor: float,
+                out: wp.array3d[float]):
+    """Signed distance to a ring torus, node ``(i, j, k)`` at ``start + step (i, j, k)``.
+
+    ``start`` is the grid's origin relative to the torus' centre; ``axis`` is a unit vector,
+    ``major`` the core circle's radius and ``minor`` the tube's (negative inside the tube).
+    """
+    i, j, k = wp.tid()
+    v = start + step * wp.vec3(float(i), float(j), float(k))
+    z = wp.dot(v, axis)
+    rho = wp.length(v - z * axis)
+    out[i, j, k] = wp.sqrt((rho - major) * (rho - major) + z * z) - minor

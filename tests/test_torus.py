@@ -1,0 +1,76 @@
+"""The ring torus of the implicit start: its fit, its distance field and its ray crossings."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warpspec as ws
+from warpspec.kernels import implicit as K
+from warpspec.synthetic import make_scene
+from warpspec.torus import Torus, fit_torus
+
+
+def _truth(synthetic) -> Torus:
+    s = synthetic.surface
+    return Torus(np.asarray(s.centre, float), np.asarray(s.axis, float), float(s.major),
+                 float(s.minor))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("outliers", [0.0, 0.25])
+def test_fit_recovers_the_torus_from_flash_rays_and_points(seed, outliers):
+    synthetic = make_scene("torus", seed=seed, outliers=outliers)
+    scene = synthetic.scene()
+    origins, dirs = scene.rays()
+    torus = fit_torus(origins, dirs, scene.points.reshape(-1, 3), scale=3.0)
+    truth = _truth(synthetic)
+    tol = 1e-5 if outliers == 0.0 else 1e-3  # false highlights are rays off the core circle
+    assert abs(torus.R - truth.R) < tol and abs(torus.r - truth.r) < tol
+    assert abs(abs(float(torus.axis @ truth.axis)) - 1.0) < tol
+    assert np.abs(torus.centre - truth.centre).max() < tol
+    # every true specular point lies on it
+    assert np.abs(torus.value(synthetic.truth_points[synthetic.inliers])).max() < 10 * tol
+
+
+@pytest.mark.parametrize("name", ["sphere-around", "bottle"])
+def test_no_ring_torus_is_fitted_to_shapes_without_a_hole(name):
+    scene = make_scene(name).scene()
+    origins, dirs = scene.rays()
+    assert fit_torus(origins, dirs, scene.points.reshape(-1, 3), scale=3.0) is None
+
+
+def test_distance_field_kernel_matches_the_exact_distance(device):
+    torus = Torus(np.array([0.1, -0.2, 0.05]), np.array([0.0, 0.6, 0.8]), 0.7, 0.25)
+    origin, h, shape = np.array([-1.2, -1.3, -1.1]), 0.05, (48, 50, 46)
+    out = wp.zeros(shape, dtype=float, device=device)
+    wp.launch(K.torus_field, dim=shape,
+              inputs=[wp.vec3(*(origin - torus.centre)), h, wp.vec3(*torus.axis), torus.R,
+                      torus.r], outputs=[out], device=device)
+    idx = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), axis=-1)
+    exact = torus.value((origin + h * idx).reshape(-1, 3)).reshape(shape)
+    assert np.abs(out.numpy() - exact).max() < 1e-5
+    # the tube's inside is negative, the hole and the outside positive
+    assert (exact < 0).any() and out.numpy()[24, 26, 23] > 0.0
+
+
+def test_rays_meet_the_torus_at_its_first_crossing():
+    torus = Torus(np.zeros(3), np.array([0.0, 0.0, 1.0]), 1.0, 0.3)
+    origins = np.array([[3.0, 0.0, 0.0], [0.0, 0.0, 3.0], [3.0, 0.0, 0.1], [3.0, 0.0, 2.0]])
+    dirs = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    hits, inside = torus.intersect(origins, dirs, np.full(3, -2.0), np.full(3, 2.0), step=0.02)
+    assert inside.tolist() == [True, False, True, False]  # down the axis: through the hole
+    np.testing.assert_allclose(hits[0], [1.3, 0.0, 0.0], atol=1e-4)
+    np.testing.assert_allclose(hits[2], [1.0 + np.sqrt(0.09 - 0.01), 0.0, 0.1], atol=1e-4)
+
+
+def test_a_torus_seen_all_around_comes_out_with_its_hole():
+    """Default options, a coarse grid: watertight, Euler number 0, within a tenth of a voxel."""
+    synthetic = make_scene("torus", outliers=0.1)
+    result = ws.reconstruct(synthetic.scene(), resolution=32, iterations=20, device="cpu")
+    mesh = result.mesh.copy()
+    mesh.merge_vertices()
+    assert mesh.is_watertight and mesh.euler_number == 0
+    err = np.abs(_truth(synthetic).value(result.vertices))
+    assert err.mean() < 0.1 * result.grid.spacing
+    assert sorted(r["index"] for r in result.rejected) == \
+        np.flatnonzero(synthetic.outlier_mask).tolist()
