@@ -36,9 +36,9 @@ from warpspec.synthetic import (
     scene_names,
 )
 
-SHAPES = ["sphere-around", "ellipsoid-around", "torus", "bottle", "wrap", "freeform",
-          "point-light"]
-CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "torus": 0}
+SHAPES = ["sphere-around", "ellipsoid-around", "torus", "torus-lamps", "bottle", "wrap",
+          "freeform", "point-light"]
+CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "torus": 0, "torus-lamps": 0}
 
 NAMES = scene_names()
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"

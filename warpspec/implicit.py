@@ -69,6 +69,8 @@ ROBUST_SMOOTHNESS = (10.0, 5.0, 2.5, 1.2, 0.6, 0.2)
 """Smoothness (as SMOOTHNESS) of the robust passes, stiff to supple, on the levels up to
 ROBUST_TOP."""
 ROBUST_TOP = 32
+TORUS_ROUNDS = 6
+"""Fit-and-intersect rounds of the torus when some rays are not flash-lit (normal lines)."""
 ROUNDS_COARSE = 4
 """Intersect-and-refit rounds on each coarse level."""
 ROUNDS_FINE = 2
@@ -518,33 +520,39 @@ class ImplicitStart:
     def _torus(self, guess: Guess) -> T.Torus | None:
         """A ring torus that meets the normals as a quadric start must, or ``None``.
 
-        Tried only when the cameras stand all around and at least :data:`T.MIN_RAYS` rays are
-        flash-lit (normal lines, which a torus' all cross its core circle). Sets the rays'
+        Tried only when the cameras stand all around. A flash-lit ray is a normal line
+        itself; any other ray gives the normal line through its current hit (on the quadric
+        first, then on the torus fitted last), :data:`TORUS_ROUNDS` times. Sets the rays'
         residuals and weights (the rays it misses by more than REJECT_DEG are rejected).
         """
         if guess.kind != "sphere":
             return None
         origins, dirs, codes, _ = self._rays
-        flash = codes == LIGHT_CAMERA
-        if int(flash.sum()) < T.MIN_RAYS:
-            return None
         lo, hi = self.grid.origin, self.grid.upper
-        torus = T.fit_torus(origins[flash], dirs[flash], self.scene.points.reshape(-1, 3),
-                            scale=float(np.max(hi - lo)))
-        if torus is None:
-            return None
-        hits, inside = torus.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
+        points = self.scene.points.reshape(-1, 3)
+        flash = codes == LIGHT_CAMERA
+        hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
+        torus = None
+        for _ in range(1 if flash.all() else TORUS_ROUNDS):
+            lines = (np.where(flash[:, None], origins, hits),
+                     np.where(flash[:, None], -dirs, self.scene.normals(hits)))
+            use = flash | inside
+            if int(use.sum()) < T.MIN_RAYS:
+                return None
+            torus = T.fit_torus(lines[0][use], lines[1][use], points,
+                                scale=float(np.max(hi - lo)))
+            if torus is None:
+                return None
+            hits, inside = torus.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
         if not inside.any():
             return None
-        g = torus.gradient(hits)
-        n = self.scene.normals(hits)
-        cos = np.clip(np.einsum("ij,ij->i", g, n), -1.0, 1.0)
+        cos = np.clip(np.einsum("ij,ij->i", torus.gradient(hits), self.scene.normals(hits)),
+                      -1.0, 1.0)
         residual = np.where(inside, np.degrees(np.arccos(cos)), 180.0)
         res = residual[inside]
         ok = np.mean(res <= QUADRIC_DEG) >= QUADRIC_SHARE
         ok &= np.mean((res > QUADRIC_DEG) & (res <= REJECT_DEG)) <= QUADRIC_AMBIGUOUS
-        pts = self.scene.points.reshape(-1, 3)
-        ok &= float(np.abs(torus.value(pts)).max()) <= QUADRIC_POINT_VOXELS * self.grid.spacing
+        ok &= float(np.abs(torus.value(points)).max()) <= QUADRIC_POINT_VOXELS * self.grid.spacing
         if not ok:
             return None
         self.residual = residual

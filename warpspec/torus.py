@@ -1,17 +1,19 @@
-"""A torus fitted to flash-lit highlights: the genus-one candidate of the implicit start.
+"""A torus fitted to the normal lines of highlights: the genus-one candidate of the start.
 
-With a flash at the camera the normal at a highlight points back along its ray, so each ray is
-a normal line of the surface. Every normal line of a surface of revolution meets its axis, and
-every normal line of a torus passes through its core circle (radius ``R`` about the axis, in
-the plane through the centre). The fit (docs/DESIGN.md section 7):
+Every normal line of a surface of revolution meets its axis, and every normal line of a torus
+passes through its core circle (radius ``R`` about the axis, in the plane through the centre).
+With a flash at the camera the normal at a highlight points back along its ray, so the ray is a
+normal line; under another light the implicit start passes the normal line through the ray's
+current hit, fitting and intersecting in turn. The fit (docs/DESIGN.md section 7):
 
 1. the axis: the direction, among 2,000 spread over a hemisphere, and the point whose line the
-   rays pass nearest (median distance), the point solved by least squares for each direction;
-2. the core circle: in each ray's meridian plane (through the axis), the point ``(R, z0)`` of
-   the plane's (distance from the axis, height) coordinates that the rays pass nearest;
+   normal lines pass nearest (median distance), the point solved by least squares for each
+   direction;
+2. the core circle: in each line's meridian plane (through the axis), the point ``(R, z0)`` of
+   the plane's (distance from the axis, height) coordinates that the lines pass nearest;
 3. the tube radius ``r``: the median distance of the points from the core circle;
 4. all seven numbers refined together by robust least squares (scipy's ``soft_l1`` loss) on
-   the rays' distances from the core circle and the points' distances from the torus.
+   the lines' distances from the core circle and the points' distances from the torus.
 
 The implicit start takes the torus when the quadric does not meet the normals and the torus
 does, as it would take a quadric (the same shares of rays within 3 and 10 degrees, every point
@@ -29,7 +31,7 @@ __all__ = ["Torus", "fit_torus"]
 AXIS_DIRECTIONS = 2000
 """Candidate axis directions of the first search (spread evenly over a hemisphere)."""
 MIN_RAYS = 12
-"""Fewest flash-lit rays (normal lines) a torus is fitted to."""
+"""Fewest normal lines a torus is fitted to."""
 RING = 1.2
 """The fitted torus must be a ring: ``R >= RING * r`` (else it is no candidate)."""
 
@@ -164,11 +166,11 @@ def _unpack(params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
 
 def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
               scale: float) -> Torus | None:
-    """Fit a ring torus to flash-lit rays (normal lines) and surface points.
+    """Fit a ring torus to normal lines and surface points.
 
     Args:
-        origins: Ray origins ``(M, 3)`` (camera centres).
-        dirs: Unit ray directions ``(M, 3)``.
+        origins: A point of each normal line ``(M, 3)`` (a flash-lit ray's camera centre).
+        dirs: Unit directions of the lines ``(M, 3)`` (either sense).
         points: Surface points ``(P, 3)`` (at least one fixes the tube radius).
         scale: A length of the scene (the domain's size): the residuals' robust scale is
             1/1000 of it.

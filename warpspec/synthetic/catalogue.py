@@ -337,6 +337,20 @@ def torus(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synthe
     one above and one below looking through the hole; each keeps up to 3 visible highlights
     (a torus shows several). Eight points; domain: the box grown by 12% of the diameter.
     """
+    return _torus(noise=noise, outliers=outliers, seed=seed, lamps=False)
+
+
+def torus_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
+                ) -> SyntheticScene:
+    """The ``torus`` scene's shape and cameras, each camera with its own directional lamp.
+
+    Each lamp is 25-40 degrees off its camera's viewing direction (as in
+    ``ellipsoid-around``), so a ray is no longer a normal line of the surface.
+    """
+    return _torus(noise=noise, outliers=outliers, seed=seed, lamps=True)
+
+
+def _torus(*, noise: float, outliers: float, seed: int, lamps: bool) -> SyntheticScene:
     rng = _shape_rng(seed, "torus")
     major = float(rng.uniform(0.95, 1.05))
     minor = major * float(rng.uniform(0.33, 0.37))
@@ -348,12 +362,22 @@ def torus(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synthe
     t1, _ = _tangent_basis(axis)
     poles = [_normalize(s * axis + 0.12 * t1 + 0.05 * rng.standard_normal(3)) for s in (1, -1)]
     dirs = np.concatenate([dirs, poles])
+    light: object = CameraLight()
+    if lamps:
+        lrng = _shape_rng(seed, "torus-lamps")
+        light = []
+        for d in dirs:
+            u, v = _tangent_basis(d)
+            a = lrng.uniform(0, 2 * math.pi)
+            tilt = math.radians(lrng.uniform(25.0, 40.0))
+            light.append(DirectionalLight(math.cos(tilt) * d + math.sin(tilt)
+                                          * (math.cos(a) * u + math.sin(a) * v)))
     return scene_from_path(
-        surf, centre + 4.0 * dirs, light=CameraLight(), look_at_points=centre,
+        surf, centre + 4.0 * dirs, light=light, look_at_points=centre,
         points=_pick_points(mesh.vertices, surf, 8, rng), domain=_margin_box(mesh.vertices),
         candidates=mesh.vertices, intrinsics=Intrinsics(focal=560.0), up=axis,
-        name="torus", noise=noise, outliers=outliers, seed=seed, per_view=3,
-        false_highlights="surface", closed=True, euler=0,
+        name="torus-lamps" if lamps else "torus", noise=noise, outliers=outliers, seed=seed,
+        per_view=3, false_highlights="surface", closed=True, euler=0,
     )
 
 
@@ -521,6 +545,7 @@ SCENES: dict[str, Callable[..., SyntheticScene]] = {
     "sphere-around": sphere_around,
     "ellipsoid-around": ellipsoid_around,
     "torus": torus,
+    "torus-lamps": torus_lamps,
     "bottle": bottle,
     "wrap": wrap,
     "freeform": freeform,
