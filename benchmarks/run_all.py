@@ -29,12 +29,13 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
-BENCHES = ("numpy_step", "iteration", "redistance", "octant", "memory")
+BENCHES = ("numpy_step", "iteration", "redistance", "octant", "start", "memory")
 TITLES = {
     "numpy_step": "NumPy peer against warpspec's dense step kernel (agreement)",
     "iteration": "One iteration: warpspec against the NumPy step",
     "redistance": "Reinitialisation: warpspec.redistance against scikit-fmm",
     "octant": "The octant end to end, per stage (cold and warm kernel cache)",
+    "start": "Each stage of a reconstruction, on every shape class",
     "memory": "Device memory per voxel",
 }
 SCRIPTS = {
@@ -42,6 +43,7 @@ SCRIPTS = {
     "iteration": "bench_iteration.py",
     "redistance": "bench_redistance.py",
     "octant": "bench_octant.py",
+    "start": "bench_start.py",
     "memory": "bench_memory.py",
 }
 
@@ -135,6 +137,8 @@ def bench_args(name: str, args: argparse.Namespace, cuda: bool) -> list[str] | N
                     "--modes", "warm"] + dev
         sizes = [str(n) for n in _sizes(args.sizes)] if args.sizes else ["64", "128", "256"]
         return ["--resolutions", *sizes] + rep + dev
+    if name == "start":
+        return (["--smoke"] if args.smoke else rep) + dev
     if name == "memory":
         if args.smoke:
             return ["--sizes", "16", "--iterations", "2"] + dev

@@ -262,3 +262,21 @@ def test_reconstruct_shows_its_stages_on_a_terminal(tmp_path, capsys, monkeypatc
     assert stages[2].startswith("warpspec: meshing: ")
     assert stages[3].startswith("warpspec: meshing: done in ")
     assert err.index(stages[3]) < err.index("warpspec: wrote ")
+
+
+def test_bench_start_smoke_times_the_stages_that_ran():
+    import subprocess
+
+    out = subprocess.run([sys.executable, str(BENCH / "bench_start.py"), "--smoke"],
+                         capture_output=True, text=True, timeout=300, check=True).stdout
+    header = next(line for line in out.splitlines() if line.startswith("| scene |"))
+    columns = [c.strip() for c in header.split("|")[1:-1]]
+    rows = {r[0]: dict(zip(columns, r, strict=True)) for r in
+            ([c.strip() for c in line.split("|")[1:-1]] for line in out.splitlines()
+             if line.startswith("| octant") or line.startswith("| torus"))}
+    # the octant is a quadric: no torus, no grid fit; the torus is found as a torus
+    assert rows["octant"]["torus"] == "-" and rows["octant"]["grid fit"] == "-"
+    assert rows["torus"]["torus"] != "-" and rows["torus"]["grid fit"] == "-"
+    for row in rows.values():
+        stages = [float(v) for k, v in row.items() if k not in ("scene", "total") and v != "-"]
+        assert abs(sum(stages) - float(row["total"])) <= 0.01 * len(stages) + 0.01

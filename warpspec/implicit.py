@@ -424,8 +424,10 @@ class ImplicitStart:
             # after all (a stiff pass also misses a sharp but true bend) come back.
             self.excluded = np.zeros(self.m, dtype=bool)
             coarse = [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
-            for smoothness in ROBUST_SMOOTHNESS:
-                self._ladder(coarse, [], [], smoothness=smoothness)
+            for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
+                self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
+                          f"(grids {', '.join(map(str, coarse))})")
+                self._ladder(coarse, [], [], smoothness=smoothness, quiet=True)
                 self.excluded |= self._outliers()
             previous = self._ladder(ladder, rounds, cg)
             if self.excluded.any():
@@ -434,7 +436,8 @@ class ImplicitStart:
                 back = self.excluded & (self.residual <= max(self._threshold(), RETURN_DEG))
                 if back.any():
                     self.excluded &= ~back
-                    previous = self._ladder(ladder, rounds, cg)
+                    self._say(f"the ladder again, {int(back.sum())} rejected highlights back")
+                    previous = self._ladder(ladder, rounds, cg, quiet=True)
             self._anchor(previous)
             self._update_weights(previous)
             self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
@@ -447,7 +450,7 @@ class ImplicitStart:
                          cg_iterations=cg, distance=not ladder)
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
-                smoothness: float = SMOOTHNESS) -> _Level:
+                smoothness: float = SMOOTHNESS, quiet: bool = False) -> _Level:
         """Fit on every level of the ladder, each started from the one below."""
         lo, hi = self.grid.origin, self.grid.upper
         previous: _Level | None = None
@@ -456,7 +459,8 @@ class ImplicitStart:
             last = index == len(ladder) - 1
             grid = self.grid if res == max(self.grid.shape) - 1 else Grid.from_bounds(
                 lo, hi, resolution=res)
-            self._say(f"grid {res} of {', '.join(map(str, ladder))}")
+            if not quiet:
+                self._say(f"grid {res} of {', '.join(map(str, ladder))}")
             level = _Level(grid, self.device, smoothness=smoothness)
             self._use_level_rays(level)
             self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
@@ -527,6 +531,7 @@ class ImplicitStart:
         """
         if guess.kind != "sphere":
             return None
+        self._say("a ring torus fitted to the highlights' normal lines")
         origins, dirs, codes, _ = self._rays
         lo, hi = self.grid.origin, self.grid.upper
         points = self.scene.points.reshape(-1, 3)

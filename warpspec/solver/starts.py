@@ -221,6 +221,8 @@ class ImplicitFit(Start):
         fit = ImplicitStart(scene, ws.grid, ws.device, initial_plane(scene, ws.grid),
                             progress=ws.progress)
         report = fit.run(ws.phi)
+        if ws.progress is not None:
+            ws.progress("the start redistanced, the narrow band built")
         if not (report.distance and ws.band is not None):
             # a quadric's first-order distance needs none near the surface, where the band is
             # read; the band's first reinitialisation makes the rest a distance
