@@ -71,14 +71,18 @@ ROBUST_TOP."""
 ROBUST_TOP = 32
 TORUS_ROUNDS = 6
 """Fit-and-intersect rounds of the torus when some rays are not flash-lit (normal lines)."""
+FINE_ABOVE = 32
+"""Levels finer than this many cells get the requested grid's budget (ROUNDS_FINE rounds of at
+most CG_ITERATIONS_FINE): they start from the level below and only correct its detail."""
 ROUNDS_COARSE = 4
 """Intersect-and-refit rounds on each coarse level."""
 ROUNDS_FINE = 2
-"""Intersect-and-refit rounds on the requested grid."""
+"""Intersect-and-refit rounds on the requested grid (and the levels above FINE_ABOVE)."""
 CG_ITERATIONS = 200
 """Conjugate-gradient iterations of one fit on a coarse level, at most."""
-CG_ITERATIONS_FINE = 50
-"""Conjugate-gradient iterations of one fit on the requested grid, at most."""
+CG_ITERATIONS_FINE = 25
+"""Conjugate-gradient iterations of one fit on the requested grid (and the levels above
+FINE_ABOVE), at most."""
 CG_BLOCK = 10
 """Conjugate-gradient iterations between two checks of the residual (one graph replay)."""
 CG_TOLERANCE = 1e-5
@@ -471,9 +475,10 @@ class ImplicitStart:
                 wp.launch(K.resample, dim=grid.shape,
                           inputs=[previous.f, previous.world_h / level.world_h],
                           outputs=[level.f], device=self.device)
-            n_rounds = ROUNDS_FINE if last else ROUNDS_COARSE
+            fine = last or res > FINE_ABOVE
+            n_rounds = ROUNDS_FINE if fine else ROUNDS_COARSE
             for _ in range(n_rounds):
-                cg.append(self._round(level, CG_ITERATIONS_FINE if last else CG_ITERATIONS))
+                cg.append(self._round(level, CG_ITERATIONS_FINE if fine else CG_ITERATIONS))
             rounds.append(n_rounds)
             previous = level
         return previous
