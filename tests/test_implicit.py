@@ -26,8 +26,8 @@ def _hessian_energy_operator(f: np.ndarray, device: str, lam: float = 1.0,
     second = wp.zeros(shape, dtype=wp.vec3, device=device)
     mixed = wp.zeros(shape, dtype=wp.vec3, device=device)
     out = wp.zeros(shape, dtype=float, device=device)
-    wp.launch(K.hessian_terms, dim=shape, inputs=[x], outputs=[second, mixed], device=device)
-    wp.launch(K.hessian_adjoint, dim=shape, inputs=[second, mixed, x, lam, eps], outputs=[out],
+    wp.launch(K.hessian_terms, dim=shape, inputs=[0, x], outputs=[second, mixed], device=device)
+    wp.launch(K.hessian_adjoint, dim=shape, inputs=[0, second, mixed, x, lam, eps], outputs=[out],
               device=device)
     return out.numpy().astype(np.float64)
 

@@ -36,6 +36,7 @@ import warp as wp
 
 from . import quadric as Q
 from . import torus as T
+from ._parallel import launch_halves
 from .geometry import LIGHT_CAMERA, LIGHT_POINT, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
@@ -85,6 +86,9 @@ CG_ITERATIONS_FINE = 25
 FINE_ABOVE), at most."""
 CG_BLOCK = 10
 """Conjugate-gradient iterations between two checks of the residual (one graph replay)."""
+GRAPH_NODES = 100_000
+"""Levels with fewer nodes replay their CG blocks as graphs (launch overhead dominates
+there); larger ones launch directly, their stencils in two slabs on two CPU cores."""
 CG_TOLERANCE = 1e-5
 """Stop a fit when the residual norm has fallen by this factor."""
 SMOOTHNESS = 0.002
@@ -249,11 +253,8 @@ class _Level:
     def apply(self, x: wp.array, out: wp.array, grads, values) -> None:
         """``out = A x``."""
         d = self.device
-        wp.launch(K.hessian_terms, dim=self.grid.shape, inputs=[x],
-                  outputs=[self.second, self.mixed], device=d)
-        wp.launch(K.hessian_adjoint, dim=self.grid.shape,
-                  inputs=[self.second, self.mixed, x, self.lam, self.eps],
-                  outputs=[out], device=d)
+        self._slabs(K.hessian_terms, [x, self.second, self.mixed])
+        self._slabs(K.hessian_adjoint, [self.second, self.mixed, x, self.lam, self.eps, out])
         xs, ws = grads
         if xs.shape[0]:
             wp.launch(K.gradient_apply, dim=xs.shape[0], inputs=[x, self.origin, self.h, xs, ws],
@@ -263,15 +264,26 @@ class _Level:
             wp.launch(K.value_apply, dim=ys.shape[0], inputs=[x, self.origin, self.h, ys, vw],
                       outputs=[out], device=d)
 
+    def _slabs(self, kernel: wp.Kernel, args: list) -> None:
+        """Launch a stencil over the grid whose first argument is ``i0``.
+
+        On the CPU two threads take a slab of ``i`` each (one launch while a graph is captured).
+        """
+        shape = self.grid.shape
+
+        def launch(first: int, count: int, _half: int) -> None:
+            wp.launch(kernel, dim=(count, shape[1], shape[2]), inputs=[first, *args],
+                      device=self.device)
+
+        launch_halves(launch, shape[0], self.device, nodes=self.count)
+
     def set_prior(self, prior: wp.array) -> None:
         """Make the smoothness act on ``f - prior``: store ``lam D^T W D prior``."""
         d = self.device
         self.prior_term = wp.zeros(self.grid.shape, dtype=float, device=d)
-        wp.launch(K.hessian_terms, dim=self.grid.shape, inputs=[prior],
-                  outputs=[self.second, self.mixed], device=d)
-        wp.launch(K.hessian_adjoint, dim=self.grid.shape,
-                  inputs=[self.second, self.mixed, prior, self.lam, 0.0],
-                  outputs=[self.prior_term], device=d)
+        self._slabs(K.hessian_terms, [prior, self.second, self.mixed])
+        self._slabs(K.hessian_adjoint, [self.second, self.mixed, prior, self.lam, 0.0,
+                                        self.prior_term])
 
     def solve(self, grads, normals, values, iterations: int) -> int:
         """Fit ``f`` (started from its current values) to the samples; CG iterations run."""
@@ -308,7 +320,7 @@ class _Level:
         graph = None
         while done < iterations:
             block = min(CG_BLOCK, iterations - done)
-            if block == CG_BLOCK:
+            if block == CG_BLOCK and self.count < GRAPH_NODES:
                 # a block of iterations as one Warp graph: replaying it costs a fraction of
                 # the launches' own overhead, which dominates on the coarse levels
                 if graph is None:

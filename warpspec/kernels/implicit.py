@@ -127,9 +127,14 @@ def mixed_difference(f: wp.array3d[float], i: int, j: int, k: int, a: int, b: in
 
 
 @wp.kernel
-def hessian_terms(f: wp.array3d[float], diag: wp.array3d[wp.vec3], mixed: wp.array3d[wp.vec3]):
-    """Second differences of ``f`` at every node: ``(xx, yy, zz)`` and ``(xy, xz, yz)``."""
+def hessian_terms(i0: int, f: wp.array3d[float], diag: wp.array3d[wp.vec3],
+                  mixed: wp.array3d[wp.vec3]):
+    """Second differences of ``f`` at every node: ``(xx, yy, zz)`` and ``(xy, xz, yz)``.
+
+    Thread ``(i, j, k)`` takes node ``(i0 + i, j, k)`` (a launch may cover a slab).
+    """
     i, j, k = wp.tid()
+    i = i + i0
     diag[i, j, k] = wp.vec3(second_difference(f, i, j, k, 0), second_difference(f, i, j, k, 1),
                             second_difference(f, i, j, k, 2))
     mixed[i, j, k] = wp.vec3(mixed_difference(f, i, j, k, 0, 1),
@@ -148,6 +153,7 @@ def _component_at(diag: wp.array3d[wp.vec3], p: wp.vec3i, axis: int) -> float:
 
 @wp.kernel
 def hessian_adjoint(
+    i0: int,
     diag: wp.array3d[wp.vec3],
     mixed: wp.array3d[wp.vec3],
     f: wp.array3d[float],
@@ -158,9 +164,11 @@ def hessian_adjoint(
     """``out = lam * D^T W D f + eps * f``: the smoothness and the proximity terms.
 
     ``D`` stacks the six second differences, ``W`` weighs the mixed ones twice (the Frobenius
-    norm of the Hessian counts ``f_xy`` and ``f_yx``). Writes every node of ``out``.
+    norm of the Hessian counts ``f_xy`` and ``f_yx``). Writes every node of ``out`` (thread
+    ``(i, j, k)`` node ``(i0 + i, j, k)``).
     """
     i, j, k = wp.tid()
+    i = i + i0
     q = wp.vec3i(i, j, k)
     s = float(0.0)
     for axis in range(3):
