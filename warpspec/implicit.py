@@ -500,11 +500,7 @@ class ImplicitStart:
             self.progress(text)
 
     def _outliers(self) -> np.ndarray:
-        """Rays whose normal the fit misses by more than the others' spread allows.
-
-        Sigma clipping: the spread is the robust standard deviation (1.4826 times the median
-        miss) of the rays not yet clipped, recomputed after each clip until none is added.
-        """
+        """Rays not yet rejected whose normal the fit misses by more than :meth:`_threshold`."""
         live = (self.kind.numpy() != K.ANCHOR_NONE) & ~self.excluded
         return live & (self.residual > self._threshold())
 
@@ -525,17 +521,28 @@ class ImplicitStart:
         It must meet most normals within noise, the rest must be clearly false (far off, not
         a gradual falling away), and it must hold the points.
         """
-        if not inside.any():
-            return False
-        res = self.residual[inside]
-        within = np.mean(res <= QUADRIC_DEG) >= QUADRIC_SHARE
-        within &= np.mean((res > QUADRIC_DEG) & (res <= REJECT_DEG)) <= QUADRIC_AMBIGUOUS
         pts = self.scene.points.reshape(-1, 3)
-        if len(pts):
-            g = np.linalg.norm(self.quadric.gradient(pts), axis=1)
-            dist = np.abs(self.quadric.value(pts)) / np.maximum(g, 1e-300)
-            within &= float(dist.max()) * self.quadric.scale <= QUADRIC_POINT_VOXELS * \
-                self.grid.spacing
+        g = np.linalg.norm(self.quadric.gradient(pts), axis=1)
+        dist = np.abs(self.quadric.value(pts)) / np.maximum(g, 1e-300) * self.quadric.scale
+        return self._shape_suffices(self.residual[inside], dist)
+
+    def _shape_suffices(self, residual: np.ndarray, point_distance: np.ndarray) -> bool:
+        """Whether a closed-form shape (a quadric, a torus) is the start by itself.
+
+        Args:
+            residual: Its normal misses (degrees) at the rays that meet the domain.
+            point_distance: The points' distances from it (world units).
+
+        It must meet most normals within noise, the rest must be clearly false (far off, not
+        a gradual falling away), and it must hold the points.
+        """
+        if not len(residual):
+            return False
+        within = np.mean(residual <= QUADRIC_DEG) >= QUADRIC_SHARE
+        within &= np.mean((residual > QUADRIC_DEG) & (residual <= REJECT_DEG)) \
+            <= QUADRIC_AMBIGUOUS
+        if len(point_distance):
+            within &= float(point_distance.max()) <= QUADRIC_POINT_VOXELS * self.grid.spacing
         return bool(within)
 
     def _torus(self, guess: Guess) -> T.Torus | None:
@@ -571,11 +578,7 @@ class ImplicitStart:
         cos = np.clip(np.einsum("ij,ij->i", torus.gradient(hits), self.scene.normals(hits)),
                       -1.0, 1.0)
         residual = np.where(inside, np.degrees(np.arccos(cos)), 180.0)
-        res = residual[inside]
-        ok = np.mean(res <= QUADRIC_DEG) >= QUADRIC_SHARE
-        ok &= np.mean((res > QUADRIC_DEG) & (res <= REJECT_DEG)) <= QUADRIC_AMBIGUOUS
-        ok &= float(np.abs(torus.value(points)).max()) <= QUADRIC_POINT_VOXELS * self.grid.spacing
-        if not ok:
+        if not self._shape_suffices(residual[inside], np.abs(torus.value(points))):
             return None
         self.residual = residual
         self.weights = (inside & (residual <= REJECT_DEG)).astype(float)

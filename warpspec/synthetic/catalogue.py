@@ -298,6 +298,18 @@ def sphere_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     )
 
 
+def _lamps(dirs: np.ndarray, rng: np.random.Generator) -> list[DirectionalLight]:
+    """One directional lamp per camera direction, 25-40 degrees off it, at a random azimuth."""
+    lights = []
+    for d in dirs:
+        t1, t2 = _tangent_basis(d)
+        a = rng.uniform(0, 2 * math.pi)
+        tilt = math.radians(rng.uniform(25.0, 40.0))
+        lights.append(DirectionalLight(math.cos(tilt) * d + math.sin(tilt)
+                                       * (math.cos(a) * t1 + math.sin(a) * t2)))
+    return lights
+
+
 def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
                      ) -> SyntheticScene:
     """A whole ellipsoid (axes about 1, 0.82, 0.67) seen all around, one lamp per camera.
@@ -313,15 +325,8 @@ def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     surf = Ellipsoid(centre, radii)
     mesh = surf.mesh(subdivisions=5)
     dirs = _around(28, rng)
-    lights = []
-    for d in dirs:
-        t1, t2 = _tangent_basis(d)
-        a = rng.uniform(0, 2 * math.pi)
-        tilt = math.radians(rng.uniform(25.0, 40.0))
-        lights.append(DirectionalLight(math.cos(tilt) * d + math.sin(tilt)
-                                       * (math.cos(a) * t1 + math.sin(a) * t2)))
     return scene_from_path(
-        surf, centre + 3.2 * dirs, light=lights, look_at_points=centre,
+        surf, centre + 3.2 * dirs, light=_lamps(dirs, rng), look_at_points=centre,
         points=_pick_points(mesh.vertices, surf, 6, rng), domain=_margin_box(mesh.vertices),
         candidates=mesh.vertices, name="ellipsoid-around", mesh_options={"subdivisions": 5},
         noise=noise, outliers=outliers, seed=seed, false_highlights="surface", closed=True,
@@ -362,16 +367,7 @@ def _torus(*, noise: float, outliers: float, seed: int, lamps: bool) -> Syntheti
     t1, _ = _tangent_basis(axis)
     poles = [_normalize(s * axis + 0.12 * t1 + 0.05 * rng.standard_normal(3)) for s in (1, -1)]
     dirs = np.concatenate([dirs, poles])
-    light: object = CameraLight()
-    if lamps:
-        lrng = _shape_rng(seed, "torus-lamps")
-        light = []
-        for d in dirs:
-            u, v = _tangent_basis(d)
-            a = lrng.uniform(0, 2 * math.pi)
-            tilt = math.radians(lrng.uniform(25.0, 40.0))
-            light.append(DirectionalLight(math.cos(tilt) * d + math.sin(tilt)
-                                          * (math.cos(a) * u + math.sin(a) * v)))
+    light = _lamps(dirs, _shape_rng(seed, "torus-lamps")) if lamps else CameraLight()
     return scene_from_path(
         surf, centre + 4.0 * dirs, light=light, look_at_points=centre,
         points=_pick_points(mesh.vertices, surf, 8, rng), domain=_margin_box(mesh.vertices),
