@@ -87,6 +87,68 @@ def test_hessian_diagonal_matches_the_operator(device):
         assert d[idx] == pytest.approx(_hessian_energy_operator(e, device)[idx], rel=1e-6)
 
 
+def _third_energy_operator(f: np.ndarray, device: str, second: float = 0.0,
+                           third: float = 1.0) -> np.ndarray:
+    shape = f.shape
+    x = _field(f, device)
+    h = [wp.zeros(shape, dtype=wp.vec3, device=device) for _ in range(4)]
+    out = wp.zeros(shape, dtype=float, device=device)
+    wp.launch(K.hessian_terms, dim=shape, inputs=[0, x], outputs=[h[0], h[1]], device=device)
+    wp.launch(K.third_terms, dim=shape, inputs=[0, h[0], h[1], second, third],
+              outputs=[h[2], h[3]], device=device)
+    wp.launch(K.hessian_adjoint, dim=shape, inputs=[0, h[2], h[3], x, 1.0, 0.0], outputs=[out],
+              device=device)
+    return out.numpy().astype(np.float64)
+
+
+def _third_energy(f: np.ndarray) -> float:
+    """``sum |D^3 f|^2`` in NumPy: first differences of each interior Hessian component."""
+    e = 0.0
+    for a in range(3):
+        d2 = np.diff(f, n=2, axis=a)  # the component (a, a) on its interior nodes
+        e += sum(float(np.sum(np.diff(d2, axis=b) ** 2)) for b in range(3))
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        cross = 0.25 * (_shifted(f, a, b, 1, 1) - _shifted(f, a, b, 1, -1)
+                        - _shifted(f, a, b, -1, 1) + _shifted(f, a, b, -1, -1))
+        e += 2.0 * sum(float(np.sum(np.diff(cross, axis=c) ** 2)) for c in range(3))
+    return e
+
+
+def test_third_order_operator_is_the_gradient_of_its_energy(device):
+    rng = np.random.default_rng(1)
+    f = rng.normal(size=(7, 6, 8))
+    op = _third_energy_operator(f, device)
+    for idx in [(0, 0, 0), (3, 2, 4), (6, 5, 7), (1, 0, 3), (4, 5, 1)]:
+        up, down = f.copy(), f.copy()
+        up[idx] += 1e-3
+        down[idx] -= 1e-3
+        numeric = (_third_energy(up) - _third_energy(down)) / 2e-3
+        assert op[idx] * 2.0 == pytest.approx(numeric, rel=1e-4, abs=1e-3)
+    # with both weights: the Hessian operator plus the third-order one
+    both = _third_energy_operator(f, device, second=0.5, third=2.0)
+    expected = 0.5 * _hessian_energy_operator(f, device) + 2.0 * op
+    assert np.max(np.abs(both - expected)) < 1e-3
+
+
+def test_third_order_energy_of_cubics_and_its_null_space(device):
+    """Quadratics cost nothing; ``x^3`` and ``x^2 y`` cost what ``|D^3 f|^2`` says."""
+    n = 9
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=float) for _ in range(3)), indexing="ij")
+    quad = 0.3 * i**2 - 0.5 * i * j + 0.2 * k**2 + j - 2.0
+    assert np.max(np.abs(_third_energy_operator(quad, device))) < 1e-3
+    # x^3: second difference 6x, its first difference 6 on the (n - 3) pairs of each line
+    cube = i**3
+    energy = float(np.sum(cube * _third_energy_operator(cube, device)))
+    assert energy == pytest.approx(36.0 * (n - 3) * n * n, rel=1e-4)
+    # x^2 y: f_xx = 2y (steps of 2 along y), f_xy = 2x (counted twice, steps of 2 along x)
+    mixed = i**2 * j
+    energy = float(np.sum(mixed * _third_energy_operator(mixed, device)))
+    assert energy == pytest.approx(4.0 * n * (n - 2) * (n - 1) + 8.0 * n * (n - 3) * (n - 2),
+                                   rel=1e-4)
+    # the Hessian energy alone does not vanish on the quadratic: the third order is what adds
+    assert np.max(np.abs(_hessian_energy_operator(quad, device))) > 0.1
+
+
 def test_ray_anchor_finds_the_sphere_and_the_nearest_approach(device):
     grid = Grid(origin=np.full(3, -1.0), spacing=0.05, shape=(41, 41, 41))
     f = wp.zeros(grid.shape, dtype=float, device=device)
@@ -321,3 +383,29 @@ def test_the_set_up_reports_its_stages():
                      progress=said.append)
     assert said[0].startswith("a quadric fitted to 60 rays and 5 points")
     assert "grid 16 of 16, 32" in said and "grid 32 of 16, 32" in said
+
+
+def test_fill_pockets_removes_sealed_regions_and_keeps_the_sheet(device):
+    from warpspec.implicit import fill_pockets
+
+    n = 20
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=float) for _ in range(3)), indexing="ij")
+    sheet = k - 9.5  # a plane: each side touches the boundary
+    field = sheet.copy()
+    # a bubble of phi > 0 under the sheet, one of phi < 0 above it
+    up = np.sqrt((i - 6) ** 2 + (j - 6) ** 2 + (k - 4) ** 2) < 2.5
+    down = np.sqrt((i - 13) ** 2 + (j - 12) ** 2 + (k - 15) ** 2) < 2.5
+    field[up] = 1.0
+    field[down] = -1.0
+    phi = _field(field, device)
+    assert fill_pockets(phi, both=True) == 2
+    assert np.array_equal(phi.numpy() > 0, sheet > 0)
+    # seen all around: only the sealed pocket of phi > 0 (a cavity) goes; a closed object
+    # (a sealed region of phi < 0) stays
+    phi = _field(field, device)
+    assert fill_pockets(phi, both=False) == 1
+    assert np.array_equal(phi.numpy() > 0, (sheet > 0) & ~down)
+    # nothing sealed: nothing changes
+    phi = _field(sheet, device)
+    assert fill_pockets(phi, both=True) == 0
+    assert np.array_equal(phi.numpy(), sheet.astype(np.float32))

@@ -41,7 +41,8 @@ from .geometry import LIGHT_CAMERA, LIGHT_POINT, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
 
-__all__ = ["FitReport", "ImplicitStart", "first_guess", "level_ladder", "ray_convergence"]
+__all__ = ["FitReport", "ImplicitStart", "fill_pockets", "first_guess", "level_ladder",
+           "ray_convergence"]
 
 MIN_CONSTRAINTS = 3
 """Fewest rays entering the domain plus points below which nothing is fitted."""
@@ -93,6 +94,8 @@ CG_TOLERANCE = 1e-5
 """Stop a fit when the residual norm has fallen by this factor."""
 SMOOTHNESS = 0.002
 """Weight of the Hessian energy per unit of the domain's length (``lam = SMOOTHNESS h / L``)."""
+THIRD = 1e-4
+"""Weight of the third-order energy ``|D^3 f|^2`` (``lam3 = THIRD L / h``) of the final fit."""
 POINT_WEIGHT = 20.0
 """Weight of ``(f(y) / h)^2`` at a point constraint, against 1 for a unit normal error."""
 MISS_WEIGHT = 0.5
@@ -192,6 +195,7 @@ class FitReport:
         rejected: Indices of the rays rejected as inconsistent with the others.
         guess: The first guess's kind (``"sphere"`` or ``"plane"``).
         cg_iterations: Conjugate-gradient iterations of each fit.
+        pockets: Sealed pockets of the grid fit removed (:func:`fill_pockets`).
         distance: Whether the field written is already a distance near its zero set (the
             quadric's first-order distance ``q / |grad q|``, exact to second order there), so
             that the flow can start from it without a redistance.
@@ -205,12 +209,39 @@ class FitReport:
     guess: str
     cg_iterations: list[int] = field(default_factory=list)
     distance: bool = False
+    pockets: int = 0
+
+
+_THIRD_DIAGONAL: dict[str, float] = {}
+
+
+def _third_diagonal(device) -> float:
+    """The third-order energy's diagonal at an interior node, ``|G D e|^2`` (computed once)."""
+    key = str(device)
+    if key not in _THIRD_DIAGONAL:
+        shape = (9, 9, 9)
+        delta = np.zeros(shape, dtype=np.float32)
+        delta[4, 4, 4] = 1.0
+        x = wp.array(delta, dtype=float, device=device)
+        second = wp.zeros(shape, dtype=wp.vec3, device=device)
+        mixed = wp.zeros(shape, dtype=wp.vec3, device=device)
+        second3 = wp.zeros(shape, dtype=wp.vec3, device=device)
+        mixed3 = wp.zeros(shape, dtype=wp.vec3, device=device)
+        out = wp.zeros(shape, dtype=float, device=device)
+        wp.launch(K.hessian_terms, dim=shape, inputs=[0, x, second, mixed], device=device)
+        wp.launch(K.third_terms, dim=shape, inputs=[0, second, mixed, 0.0, 1.0, second3,
+                                                    mixed3], device=device)
+        wp.launch(K.hessian_adjoint, dim=shape, inputs=[0, second3, mixed3, x, 1.0, 0.0, out],
+                  device=device)
+        _THIRD_DIAGONAL[key] = float(out.numpy()[4, 4, 4])
+    return _THIRD_DIAGONAL[key]
 
 
 class _Level:
     """The device arrays of one level of the ladder and its fit."""
 
-    def __init__(self, grid: Grid, device, *, smoothness: float = SMOOTHNESS) -> None:
+    def __init__(self, grid: Grid, device, *, smoothness: float = SMOOTHNESS,
+                 third: float = 0.0) -> None:
         self.grid = grid
         self.device = device
         shape = grid.shape
@@ -235,7 +266,12 @@ class _Level:
         self.scalars = wp.zeros(4, dtype=wp.float64, device=d)
         # the Hessian energy per unit of the domain's length: lam = SMOOTHNESS * h / L
         self.lam = smoothness / float(max(grid.shape) - 1)
+        # the third-order energy per unit of the domain's length: lam3 = THIRD * L / h
+        self.lam3 = third * float(max(grid.shape) - 1)
         self.eps = PROXIMITY
+        if self.lam3 > 0.0:
+            self.second3 = wp.zeros(shape, dtype=wp.vec3, device=d)
+            self.mixed3 = wp.zeros(shape, dtype=wp.vec3, device=d)
         self.prior_term = wp.zeros(shape, dtype=float, device=d)
         self._flat: dict[int, wp.array] = {}
 
@@ -253,8 +289,7 @@ class _Level:
     def apply(self, x: wp.array, out: wp.array, grads, values) -> None:
         """``out = A x``."""
         d = self.device
-        self._slabs(K.hessian_terms, [x, self.second, self.mixed])
-        self._slabs(K.hessian_adjoint, [self.second, self.mixed, x, self.lam, self.eps, out])
+        self._smoothness(x, out, self.eps)
         xs, ws = grads
         if xs.shape[0]:
             wp.launch(K.gradient_apply, dim=xs.shape[0], inputs=[x, self.origin, self.h, xs, ws],
@@ -263,6 +298,16 @@ class _Level:
         if ys.shape[0]:
             wp.launch(K.value_apply, dim=ys.shape[0], inputs=[x, self.origin, self.h, ys, vw],
                       outputs=[out], device=d)
+
+    def _smoothness(self, x: wp.array, out: wp.array, eps: float) -> None:
+        """``out = (lam D^T W D + lam3 D^T W G^T G D + eps) x``: the smooth part of ``A``."""
+        self._slabs(K.hessian_terms, [x, self.second, self.mixed])
+        if self.lam3 > 0.0:
+            self._slabs(K.third_terms, [self.second, self.mixed, self.lam, self.lam3,
+                                        self.second3, self.mixed3])
+            self._slabs(K.hessian_adjoint, [self.second3, self.mixed3, x, 1.0, eps, out])
+        else:
+            self._slabs(K.hessian_adjoint, [self.second, self.mixed, x, self.lam, eps, out])
 
     def _slabs(self, kernel: wp.Kernel, args: list) -> None:
         """Launch a stencil over the grid whose first argument is ``i0``.
@@ -281,9 +326,7 @@ class _Level:
         """Make the smoothness act on ``f - prior``: store ``lam D^T W D prior``."""
         d = self.device
         self.prior_term = wp.zeros(self.grid.shape, dtype=float, device=d)
-        self._slabs(K.hessian_terms, [prior, self.second, self.mixed])
-        self._slabs(K.hessian_adjoint, [self.second, self.mixed, prior, self.lam, 0.0,
-                                        self.prior_term])
+        self._smoothness(prior, self.prior_term, 0.0)
 
     def solve(self, grads, normals, values, iterations: int) -> int:
         """Fit ``f`` (started from its current values) to the samples; CG iterations run."""
@@ -294,7 +337,9 @@ class _Level:
         wp.launch(K.proximity_rhs, dim=shape, inputs=[self.prev, self.eps, self.prior_term],
                   outputs=[self.rhs], device=d)
         wp.launch(K.hessian_diagonal, dim=shape,
-                  inputs=[wp.vec3i(*shape), self.lam, self.eps], outputs=[self.diag], device=d)
+                  inputs=[wp.vec3i(*shape), self.lam,
+                          self.eps + self.lam3 * _third_diagonal(self.device)],
+                  outputs=[self.diag], device=d)
         xs, ws = grads
         if xs.shape[0]:
             wp.launch(K.gradient_rhs, dim=xs.shape[0],
@@ -393,6 +438,7 @@ class ImplicitStart:
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
         guess = first_guess(self.scene, self.grid, self.plane)
+        self._one_side = guess.kind == "plane"
         lo, hi = self.grid.origin, self.grid.upper
         frame = 0.5 * (lo + hi)
         scale = 0.5 * float(np.max(hi - lo))
@@ -406,6 +452,7 @@ class ImplicitStart:
         self.quadric = quad
         rounds, cg = [], []
         ladder: list[int] = []
+        pockets = 0
         _, _, enters = quad.intersect(*self.scene.rays(), lo, hi)
         if int(enters.sum()) + self.scene.num_points < MIN_CONSTRAINTS:
             # too little data in the domain to fit anything: the guess stands, and the
@@ -443,7 +490,8 @@ class ImplicitStart:
             for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
                 self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
                           f"(grids {', '.join(map(str, coarse))})")
-                self._ladder(coarse, [], [], smoothness=smoothness, quiet=True)
+                self._ladder(coarse, [], [], smoothness=smoothness, third=0.0,
+                             quiet=True)
                 self.excluded |= self._outliers()
             previous = self._ladder(ladder, rounds, cg)
             if self.excluded.any():
@@ -460,13 +508,15 @@ class ImplicitStart:
                                                                  != K.ANCHOR_NONE)
             wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[previous.f, previous.world_h],
                       outputs=[out], device=self.device)
+            pockets = fill_pockets(out, both=guess.kind == "plane")
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
-                         cg_iterations=cg, distance=not ladder)
+                         cg_iterations=cg, distance=not ladder, pockets=pockets)
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
-                smoothness: float = SMOOTHNESS, quiet: bool = False) -> _Level:
+                smoothness: float = SMOOTHNESS, third: float | None = None,
+                quiet: bool = False) -> _Level:
         """Fit on every level of the ladder, each started from the one below."""
         lo, hi = self.grid.origin, self.grid.upper
         previous: _Level | None = None
@@ -477,7 +527,8 @@ class ImplicitStart:
                 lo, hi, resolution=res)
             if not quiet:
                 self._say(f"grid {res} of {', '.join(map(str, ladder))}")
-            level = _Level(grid, self.device, smoothness=smoothness)
+            level = _Level(grid, self.device, smoothness=smoothness,
+                           third=THIRD if third is None else third)
             self._use_level_rays(level)
             self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
             level.set_prior(level.p)
@@ -632,6 +683,7 @@ class ImplicitStart:
 
     def _round(self, level: _Level, iterations: int) -> int:
         """Intersect, reweigh, build the samples, fit; returns the CG iterations."""
+        fill_pockets(level.f, both=self._one_side)
         self._anchor(level)
         self._update_weights(level)
         grads, normals, values = self._samples(level)
@@ -670,6 +722,46 @@ class ImplicitStart:
         values = (wp.array(ys.astype(f32), dtype=wp.vec3, device=d),
                   wp.array(vw.astype(f32), dtype=float, device=d))
         return grads, nrm, values
+
+
+def fill_pockets(phi: wp.array, *, both: bool) -> int:
+    """Remove the sealed pockets of a fitted field: regions of one sign that miss the boundary.
+
+    A camera cannot see into a sealed cavity of a closed object, nor can a surface seen from
+    one side hold a bubble: such a pocket is an overshoot of the fit between highlights (a
+    ray that meets it first then holds it). Each face-connected region of ``phi > 0`` that
+    touches no face of the grid has its sign flipped; with ``both`` (a surface seen from one
+    side) the regions of ``phi <= 0`` too. Runs once, on the host (scipy's labelling).
+
+    Args:
+        phi: The field on the grid, changed in place.
+        both: Whether pockets of either sign are removed (else only those of ``phi > 0``).
+
+    Returns:
+        The number of pockets removed.
+    """
+    from scipy import ndimage
+
+    values = phi.numpy()
+    removed = 0
+    for positive in ((True, False) if both else (True,)):
+        mask = values > 0.0 if positive else values <= 0.0
+        labels, count = ndimage.label(mask)
+        if count <= 1:
+            continue
+        border = np.zeros(count + 1, dtype=bool)
+        for axis in range(3):
+            for end in (0, -1):
+                border[np.unique(np.take(labels, end, axis=axis))] = True
+        sealed = ~border
+        sealed[0] = False
+        if sealed.any():
+            pocket = sealed[labels]
+            values[pocket] = -values[pocket] if positive else np.maximum(-values[pocket], 1e-6)
+            removed += int(sealed.sum())
+    if removed:
+        phi.assign(values)
+    return removed
 
 
 def rejected_summary(report: FitReport, scene) -> list[dict]:

@@ -191,6 +191,75 @@ def hessian_adjoint(
 
 
 @wp.func
+def _valid_second(shape: wp.vec3i, p: wp.vec3i, c: int) -> bool:
+    """Whether the Hessian component ``c`` (0-2: xx, yy, zz; 3-5: xy, xz, yz) exists at ``p``."""
+    if p[0] < 0 or p[1] < 0 or p[2] < 0:
+        return False
+    if p[0] >= shape[0] or p[1] >= shape[1] or p[2] >= shape[2]:
+        return False
+    a = c
+    b = c
+    if c >= 3:
+        a = wp.where(c == 5, 1, 0)
+        b = wp.where(c == 3, 1, 2)
+    return p[a] >= 1 and p[a] <= shape[a] - 2 and p[b] >= 1 and p[b] <= shape[b] - 2
+
+
+@wp.func
+def _second_at(diag: wp.array3d[wp.vec3], mixed: wp.array3d[wp.vec3], p: wp.vec3i,
+               c: int) -> float:
+    if c < 3:
+        return diag[p[0], p[1], p[2]][c]
+    return mixed[p[0], p[1], p[2]][c - 3]
+
+
+@wp.kernel
+def third_terms(
+    i0: int,
+    diag: wp.array3d[wp.vec3],
+    mixed: wp.array3d[wp.vec3],
+    second_weight: float,
+    third_weight: float,
+    out_diag: wp.array3d[wp.vec3],
+    out_mixed: wp.array3d[wp.vec3],
+):
+    """``out = second_weight H + third_weight G^T G H`` for the Hessian components ``H``.
+
+    ``G`` takes the first differences of each component between neighbouring nodes where it
+    exists at both, so ``|G H|^2`` is the discrete ``|D^3 f|^2`` (with the mixed components
+    counted twice by :func:`hessian_adjoint`'s weights). Feeding ``out`` to
+    :func:`hessian_adjoint` gives ``D^T W (second_weight + third_weight G^T G) D f``: the
+    Hessian energy and the third-order energy in one pass. Thread ``(i, j, k)`` writes node
+    ``(i0 + i, j, k)``.
+    """
+    i, j, k = wp.tid()
+    i = i + i0
+    q = wp.vec3i(i, j, k)
+    shape = wp.vec3i(diag.shape[0], diag.shape[1], diag.shape[2])
+    od = wp.vec3(0.0, 0.0, 0.0)
+    om = wp.vec3(0.0, 0.0, 0.0)
+    for c in range(6):
+        v = float(0.0)
+        if _valid_second(shape, q, c):
+            here = _second_at(diag, mixed, q, c)
+            s = float(0.0)
+            for axis in range(3):
+                e = wp.vec3i(0, 0, 0)
+                e[axis] = 1
+                if _valid_second(shape, q - e, c):
+                    s += here - _second_at(diag, mixed, q - e, c)
+                if _valid_second(shape, q + e, c):
+                    s += here - _second_at(diag, mixed, q + e, c)
+            v = second_weight * here + third_weight * s
+        if c < 3:
+            od[c] = v
+        else:
+            om[c - 3] = v
+    out_diag[i, j, k] = od
+    out_mixed[i, j, k] = om
+
+
+@wp.func
 def _count_second(shape: wp.vec3i, p: wp.vec3i, axis: int) -> float:
     """``sum c^2`` over the valid second-difference stencils along ``axis`` that hold ``p``."""
     n = shape[axis]
