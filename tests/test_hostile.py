@@ -625,15 +625,26 @@ def test_a_scene_without_points_is_not_supported():
 
 
 @pytest.mark.parametrize("s", [1e-6, 1e9])
-def test_the_default_start_is_free_of_units_too(s):
-    """The implicit start (quadric and grid fit) at 1e-6 and 1e9 gives the mesh scaled."""
+@pytest.mark.parametrize("name", ["point-light", "bottle", "torus"])
+def test_the_default_start_is_free_of_units_too(s, name):
+    """The implicit start at 1e-6 and 1e9 gives the mesh scaled: the quadric and the grid fit
+    (the point-lit dome), the surface of revolution (the bottle), the ring torus."""
     from warpspec.synthetic import make_scene
 
-    data = make_scene("point-light").scene_dict  # not a quadric: the grid fit runs
+    data = make_scene(name).scene_dict
     ref = ws.reconstruct(ws.Scene.from_dict(data), iterations=10, resolution=24, device="cpu")
     run_ = ws.reconstruct(ws.Scene.from_dict(scaled(data, s)), iterations=10, resolution=24,
                           device="cpu")
-    assert run_.vertices.shape == ref.vertices.shape
-    assert np.array_equal(run_.faces, ref.faces)
     extent = np.ptp(ref.vertices, axis=0).max()
-    assert np.abs(run_.vertices / s - ref.vertices).max() <= 1e-5 * extent
+    if name == "point-light":
+        assert run_.vertices.shape == ref.vertices.shape
+        assert np.array_equal(run_.faces, ref.faces)
+        assert np.abs(run_.vertices / s - ref.vertices).max() <= 1e-5 * extent
+    else:
+        # a node within rounding of the zero set may add or drop a vertex: the same surface
+        from scipy.spatial import cKDTree
+
+        a, b = run_.vertices / s, ref.vertices
+        assert abs(len(a) - len(b)) <= 0.01 * len(b)
+        assert cKDTree(b).query(a)[0].max() <= 1e-3 * extent
+        assert cKDTree(a).query(b)[0].max() <= 1e-3 * extent

@@ -35,6 +35,7 @@ import numpy as np
 import warp as wp
 
 from . import quadric as Q
+from . import revolution as R
 from . import torus as T
 from ._parallel import launch_halves
 from .geometry import LIGHT_CAMERA, LIGHT_POINT, plane_frame
@@ -196,6 +197,8 @@ class FitReport:
         guess: The first guess's kind (``"sphere"`` or ``"plane"``).
         cg_iterations: Conjugate-gradient iterations of each fit.
         pockets: Sealed pockets of the grid fit removed (:func:`fill_pockets`).
+        shape: What the start is: ``"quadric"``, ``"torus"``, ``"revolution"`` (a surface of
+            revolution), ``"grid"`` (the grid fit) or ``"guess"`` (too little data).
         distance: Whether the field written is already a distance near its zero set (the
             quadric's first-order distance ``q / |grad q|``, exact to second order there), so
             that the flow can start from it without a redistance.
@@ -210,6 +213,7 @@ class FitReport:
     cg_iterations: list[int] = field(default_factory=list)
     distance: bool = False
     pockets: int = 0
+    shape: str = "grid"
 
 
 _THIRD_DIAGONAL: dict[str, float] = {}
@@ -434,6 +438,8 @@ class ImplicitStart:
         self._level_rays = None
         self.torus: T.Torus | None = None
         """The ring torus taken as the start, when one was."""
+        self.revolution: R.SurfaceOfRevolution | None = None
+        """The surface of revolution taken as the start, when one was."""
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -453,6 +459,7 @@ class ImplicitStart:
         rounds, cg = [], []
         ladder: list[int] = []
         pockets = 0
+        shape = "grid"
         _, _, enters = quad.intersect(*self.scene.rays(), lo, hi)
         if int(enters.sum()) + self.scene.num_points < MIN_CONSTRAINTS:
             # too little data in the domain to fit anything: the guess stands, and the
@@ -460,15 +467,30 @@ class ImplicitStart:
             self.quadric = initial
             self._quadric_field(self.grid, out)
             self.weights = enters.astype(float)
+            shape = "guess"
         elif self._quadric_suffices(enters):
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
+            shape = "quadric"
         elif (torus := self._torus(guess)) is not None:
             self.torus = t = torus
+            shape = "torus"
             start = np.asarray(self.grid.origin, dtype=np.float64) - t.centre
             wp.launch(K.torus_field, dim=self.grid.shape,
                       inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
                               wp.vec3(*(float(v) for v in t.axis)), float(t.R), float(t.r)],
+                      outputs=[out], device=self.device)
+        elif (revolution := self._revolution(guess)) is not None:
+            self.revolution = rev = revolution
+            shape = "revolution"
+            start = np.asarray(self.grid.origin, dtype=np.float64) - rev.base
+            as_array = lambda v: wp.array(np.asarray(v, dtype=np.float32), dtype=float,  # noqa: E731
+                                          device=self.device)
+            wp.launch(K.revolution_field, dim=self.grid.shape,
+                      inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
+                              wp.vec3(*(float(v) for v in rev.axis)), float(rev.heights[0]),
+                              float(rev.heights[1] - rev.heights[0]), as_array(rev.radii),
+                              as_array(rev.slopes())],
                       outputs=[out], device=self.device)
         else:
             if guess.kind == "plane" and self.quadric.sheets_crossed(
@@ -512,7 +534,7 @@ class ImplicitStart:
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
-                         cg_iterations=cg, distance=not ladder, pockets=pockets)
+                         cg_iterations=cg, distance=not ladder, pockets=pockets, shape=shape)
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
                 smoothness: float = SMOOTHNESS, third: float | None = None,
@@ -597,43 +619,66 @@ class ImplicitStart:
         return bool(within)
 
     def _torus(self, guess: Guess) -> T.Torus | None:
-        """A ring torus that meets the normals as a quadric start must, or ``None``.
+        """A ring torus that meets the normals as a quadric start must, or ``None``."""
+        def fit(starts: np.ndarray, dirs: np.ndarray) -> T.Torus | None:
+            if len(starts) < T.MIN_RAYS:
+                return None
+            return T.fit_torus(starts, dirs, self.scene.points.reshape(-1, 3),
+                               scale=float(np.max(self.grid.upper - self.grid.origin)))
+
+        return self._from_normal_lines(guess, fit,
+                                       "a ring torus fitted to the highlights' normal lines")
+
+    def _revolution(self, guess: Guess) -> R.SurfaceOfRevolution | None:
+        """A surface of revolution that meets the normals as a quadric start must, or ``None``."""
+        def fit(starts: np.ndarray, dirs: np.ndarray) -> R.SurfaceOfRevolution | None:
+            return R.fit_revolution(starts, dirs, self.scene.points, lo=self.grid.origin,
+                                    hi=self.grid.upper, voxel=self.grid.spacing)[0]
+
+        return self._from_normal_lines(
+            guess, fit, "a surface of revolution fitted to the highlights' normal lines")
+
+    def _from_normal_lines(self, guess: Guess, fit: Callable, message: str):
+        """A shape fitted to the highlights' normal lines, if it is the start by itself.
 
         Tried only when the cameras stand all around. A flash-lit ray is a normal line
         itself; any other ray gives the normal line through its current hit (on the quadric
-        first, then on the torus fitted last), :data:`TORUS_ROUNDS` times. Sets the rays'
-        residuals and weights (the rays it misses by more than REJECT_DEG are rejected).
+        first, then on the shape fitted last), :data:`TORUS_ROUNDS` times. ``fit`` takes the
+        lines (a point outside the surface and the inward direction of each) and returns the
+        shape (with ``intersect``, ``value`` and ``gradient``) or ``None``. The shape is the
+        start when it meets the normals and holds the points as a quadric must
+        (:meth:`_shape_suffices`); then the rays' residuals and weights are set (the rays it
+        misses by more than REJECT_DEG are rejected).
         """
         if guess.kind != "sphere":
             return None
-        self._say("a ring torus fitted to the highlights' normal lines")
+        self._say(message)
         origins, dirs, codes, _ = self._rays
         lo, hi = self.grid.origin, self.grid.upper
+        outside = 2.0 * float(np.max(hi - lo))
         points = self.scene.points.reshape(-1, 3)
         flash = codes == LIGHT_CAMERA
         hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
-        torus = None
+        shape = None
         for _ in range(1 if flash.all() else TORUS_ROUNDS):
-            lines = (np.where(flash[:, None], origins, hits),
-                     np.where(flash[:, None], -dirs, self.scene.normals(hits)))
+            normals = self.scene.normals(hits)
+            starts = np.where(flash[:, None], origins, hits + outside * normals)
+            inward = np.where(flash[:, None], dirs, -normals)
             use = flash | inside
-            if int(use.sum()) < T.MIN_RAYS:
+            shape = fit(starts[use], inward[use])
+            if shape is None:
                 return None
-            torus = T.fit_torus(lines[0][use], lines[1][use], points,
-                                scale=float(np.max(hi - lo)))
-            if torus is None:
-                return None
-            hits, inside = torus.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
+            hits, inside = shape.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
         if not inside.any():
             return None
-        cos = np.clip(np.einsum("ij,ij->i", torus.gradient(hits), self.scene.normals(hits)),
+        cos = np.clip(np.einsum("ij,ij->i", shape.gradient(hits), self.scene.normals(hits)),
                       -1.0, 1.0)
         residual = np.where(inside, np.degrees(np.arccos(cos)), 180.0)
-        if not self._shape_suffices(residual[inside], np.abs(torus.value(points))):
+        if not self._shape_suffices(residual[inside], np.abs(shape.value(points))):
             return None
         self.residual = residual
         self.weights = (inside & (residual <= REJECT_DEG)).astype(float)
-        return torus
+        return shape
 
     def _quadric_field(self, grid: Grid, out: wp.array, *, unit: float = 1.0) -> None:
         """The quadric's first-order distance on ``grid``, in units of ``unit``."""

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .normal_lines import best_axis, first_crossing
+
 __all__ = ["Torus", "fit_torus"]
 
-AXIS_DIRECTIONS = 2000
-"""Candidate axis directions of the first search (spread evenly over a hemisphere)."""
 MIN_RAYS = 12
 """Fewest normal lines a torus is fitted to."""
 RING = 1.2
@@ -67,72 +67,12 @@ class Torus:
                   hi: np.ndarray, *, step: float) -> tuple[np.ndarray, np.ndarray]:
         """First crossing of each ray with the torus inside the box ``[lo, hi]``.
 
-        Sphere tracing on the exact distance (at least ``step / 4`` a step, so that a ray
-        grazing the surface creeps past it), then bisection of the first crossing.
+        Sphere tracing on the exact distance (:func:`warpspec.normal_lines.first_crossing`).
 
         Returns:
             Hit points ``(N, 3)`` and a mask of the rays that meet the torus in the box.
         """
-        o = np.asarray(origins, dtype=np.float64)
-        d = np.asarray(dirs, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t0 = (lo - o) / d
-            t1 = (hi - o) / d
-        near = np.nanmax(np.minimum(t0, t1), axis=1).clip(min=0.0)
-        far = np.nanmin(np.maximum(t0, t1), axis=1)
-        t = near.copy()
-        prev = near.copy()
-        alive = near < far
-        hit = np.zeros(len(o), dtype=bool)
-        for _ in range(2000):
-            idx = np.flatnonzero(alive & ~hit)
-            if len(idx) == 0:
-                break
-            f = self.value(o[idx] + t[idx, None] * d[idx])
-            crossed = f < 0.0
-            hit[idx[crossed]] = True
-            go = idx[~crossed]
-            prev[go] = t[go]
-            # the exact distance never steps over the surface; a grazing ray creeps on
-            t[go] += np.maximum(f[~crossed], 0.25 * step)
-            alive[go[t[go] > far[go]]] = False
-        hit &= alive
-        # bisection between the last point outside and the first inside
-        a, b = prev, t
-        for _ in range(30):
-            m = 0.5 * (a + b)
-            inside = self.value(o + m[:, None] * d) < 0.0
-            b = np.where(inside, m, b)
-            a = np.where(inside, a, m)
-        return o + b[:, None] * d, hit
-
-
-def _fibonacci_hemisphere(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    polar = np.arccos(1.0 - i / n)
-    azimuth = np.pi * (1.0 + 5.0**0.5) * i
-    return np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
-                     np.cos(polar)], axis=1)
-
-
-def _axis(p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """The line (point, direction) that the lines ``p + s n`` pass nearest (median)."""
-    dirs = _fibonacci_hemisphere(AXIS_DIRECTIONS)
-    m = np.cross(n[None, :, :], dirs[:, None, :])  # (D, M, 3)
-    length = np.linalg.norm(m, axis=2)
-    ok = length > 1e-3
-    m = np.where(ok[..., None], m / np.maximum(length, 1e-300)[..., None], 0.0)
-    A = np.einsum("dmi,dmj->dij", m, m) + 1e-9 * np.eye(3)  # the axis' own direction is free
-    b = np.einsum("dmi,dm->di", m, np.einsum("mi,dmi->dm", p, m))
-    c = np.linalg.solve(A, b[..., None])[..., 0]
-    dist = np.abs(np.einsum("dmi,dmi->dm", p[None] - c[:, None], m))
-    dist = np.where(ok, dist, np.nan)
-    usable = ok.sum(axis=1) >= 3
-    if not usable.any():
-        return None, None
-    cost = np.where(usable, np.nanmedian(np.where(usable[:, None], dist, 0.0), axis=1), np.inf)
-    best = int(np.argmin(cost))
-    return c[best], dirs[best]
+        return first_crossing(self.value, origins, dirs, lo, hi, step=step)
 
 
 def _core_distance(params: np.ndarray, p: np.ndarray, n: np.ndarray, *,
@@ -186,7 +126,7 @@ def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) < MIN_RAYS or len(pts) == 0:
         return None
-    c, a = _axis(p, n)
+    c, a = best_axis(p, n)
     if c is None:
         return None
     # the core circle in the meridian planes: (R, z0) by a search over a grid, then refined
@@ -208,12 +148,16 @@ def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     r = float(np.median(np.hypot(rho - R, z)))
     x0 = np.r_[c, np.arccos(np.clip(a[2], -1.0, 1.0)), np.arctan2(a[1], a[0]), R, r]
 
-    def residuals(params: np.ndarray) -> np.ndarray:
-        torus = Torus(*_unpack(params))
-        return np.r_[_core_distance(params, p, n), torus.value(pts)]
+    # lengths in units of the scene's ``scale`` and residuals too: the same fit in any unit
+    unit = np.r_[np.full(3, scale), 1.0, 1.0, scale, scale]
 
-    fit = least_squares(residuals, x0, loss="soft_l1", f_scale=1e-3 * scale, max_nfev=200)
-    torus = Torus(*_unpack(fit.x))
+    def residuals(x: np.ndarray) -> np.ndarray:
+        params = x * unit
+        torus = Torus(*_unpack(params))
+        return np.r_[_core_distance(params, p, n), torus.value(pts)] / scale
+
+    fit = least_squares(residuals, x0 / unit, loss="soft_l1", f_scale=1e-3, max_nfev=200)
+    torus = Torus(*_unpack(fit.x * unit))
     if not (torus.r > 0.0 and torus.R >= RING * torus.r):
         return None
     return torus

@@ -660,3 +660,25 @@ def torus_field(start: wp.vec3, step: float, axis: wp.vec3, major: float, minor:
     z = wp.dot(v, axis)
     rho = wp.length(v - z * axis)
     out[i, j, k] = wp.sqrt((rho - major) * (rho - major) + z * z) - minor
+
+
+@wp.kernel
+def revolution_field(start: wp.vec3, step: float, axis: wp.vec3, h0: float, dh: float,
+                     radii: wp.array[float], slopes: wp.array[float], out: wp.array3d[float]):
+    """First-order distance to a surface of revolution, ``(rho - r(h)) / sqrt(1 + r'(h)^2)``.
+
+    Node ``(i, j, k)`` at ``start + step (i, j, k)``, ``start`` relative to the axis' point at
+    height 0; the profile ``r`` and its slope ``r'`` are given on knots ``h0 + dh m``,
+    interpolated linearly and held constant beyond the ends (negative inside).
+    """
+    i, j, k = wp.tid()
+    v = start + step * wp.vec3(float(i), float(j), float(k))
+    h = wp.dot(v, axis)
+    rho = wp.length(v - h * axis)
+    last = radii.shape[0] - 1
+    u = wp.clamp((h - h0) / dh, 0.0, float(last))
+    m = wp.min(int(wp.floor(u)), last - 1)
+    t = u - float(m)
+    r = (1.0 - t) * radii[m] + t * radii[m + 1]
+    s = (1.0 - t) * slopes[m] + t * slopes[m + 1]
+    out[i, j, k] = (rho - r) / wp.sqrt(1.0 + s * s)

@@ -386,6 +386,20 @@ def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synth
     the bottle's width with a 12% margin and cuts its body below (height -0.45) and its neck
     above (height 0.85), so the truth is an open tube (Euler number 0).
     """
+    return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=False)
+
+
+def bottle_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
+                 ) -> SyntheticScene:
+    """The ``bottle`` scene's shape and cameras, each camera with its own directional lamp.
+
+    Each lamp is 25-40 degrees off its camera's viewing direction (as in
+    ``ellipsoid-around``), so a ray is no longer a normal line of the surface.
+    """
+    return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=True)
+
+
+def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool) -> SyntheticScene:
     rng = _shape_rng(seed, "bottle")
     axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.05 * rng.standard_normal(3))
     base = rng.uniform(-0.05, 0.05, 3)
@@ -411,12 +425,14 @@ def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synth
         ring = 1.6 * (np.cos(az)[:, None] * surf.e1 + np.sin(az)[:, None] * surf.e2)
         centres.append(base + ring + (height + rng.uniform(-0.05, 0.05, (len(az), 1))) * axis)
         targets.append(np.tile(base + aim * axis, (len(az), 1)))
+    centres, targets = np.concatenate(centres), np.concatenate(targets)
+    light = (_lamps(_normalize(centres - targets), _shape_rng(seed, "bottle-lamps"))
+             if lamps else CameraLight())
     return scene_from_path(
-        surf, np.concatenate(centres), light=CameraLight(),
-        look_at_points=np.concatenate(targets),
+        surf, centres, light=light, look_at_points=targets,
         points=_pick_points(verts[(verts[:, 2] > lo_z + 0.05) & (verts[:, 2] < hi_z - 0.05)],
                             surf, 6, rng), domain=(lo, hi),
-        candidates=verts, patch=patch, up=axis, name="bottle",
+        candidates=verts, patch=patch, up=axis, name="bottle-lamps" if lamps else "bottle",
         mesh_options={"extent": (h_lo, h_hi)}, noise=noise, outliers=outliers, seed=seed,
         per_view=2, false_highlights="surface", closed=False, euler=0,
     )
@@ -543,6 +559,7 @@ SCENES: dict[str, Callable[..., SyntheticScene]] = {
     "torus": torus,
     "torus-lamps": torus_lamps,
     "bottle": bottle,
+    "bottle-lamps": bottle_lamps,
     "wrap": wrap,
     "freeform": freeform,
     "point-light": point_light,

@@ -1,0 +1,101 @@
+"""The surface of revolution of the implicit start: its fit, its field and the bottle it gives."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warpspec as ws
+from warpspec.kernels import implicit as K
+from warpspec.normal_lines import first_crossing
+from warpspec.revolution import SurfaceOfRevolution, fit_revolution
+from warpspec.synthetic import make_scene
+
+
+def _fit(synthetic, voxel: float = 0.02):
+    scene = synthetic.scene()
+    origins, dirs = scene.rays()
+    lo, hi = scene.domain
+    return fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("outliers", [0.0, 0.25])
+def test_fit_finds_the_bottle_axis_and_its_radius_at_the_points(seed, outliers):
+    synthetic = make_scene("bottle", seed=seed, outliers=outliers)
+    surface, used = _fit(synthetic)
+    truth = synthetic.surface
+    assert surface is not None
+    # the axis: parallel to the truth's, through it
+    assert abs(abs(float(surface.axis @ truth.axis)) - 1.0) < 1e-6
+    offset = truth.base - surface.base
+    assert np.linalg.norm(offset - (offset @ truth.axis) * truth.axis) < 1e-3
+    # every false highlight's ray passes far from the axis and is left out, every true one used
+    assert used.tolist() == synthetic.inliers.tolist()
+    # the points lie on it, and so do the true highlights (radius error in voxels of 0.02)
+    pts = synthetic.scene().points
+    assert np.abs(surface.value(pts)).max() < 0.1 * 0.02
+    hl = synthetic.truth_points[synthetic.inliers]
+    body = (hl - truth.base) @ truth.axis < 0.1  # the body's ring: a cylinder's highlights
+    assert np.abs(surface.value(hl[body])).max() < 0.1 * 0.02
+    assert np.abs(surface.value(hl)).mean() < 1.0 * 0.02
+
+
+@pytest.mark.parametrize("name", ["freeform", "ellipsoid-around", "point-light"])
+def test_no_surface_of_revolution_without_a_common_axis(name):
+    """Lines that pass near no common axis (free-form normals, lamps off the cameras) fit none."""
+    surface, used = _fit(make_scene(name))
+    assert surface is None
+    assert used.mean() < 0.5
+
+
+def test_field_kernel_matches_the_first_order_distance(device):
+    heights = np.linspace(-1.0, 1.0, 81)
+    radii = 0.4 + 0.15 * np.tanh(4.0 * heights)
+    axis = np.array([0.0, 0.6, 0.8])
+    surface = SurfaceOfRevolution(np.array([0.05, -0.1, 0.0]), axis, heights, radii)
+    origin, h, shape = np.array([-0.8, -1.1, -1.0]), 0.05, (33, 41, 40)
+    out = wp.zeros(shape, dtype=float, device=device)
+    wp.launch(K.revolution_field, dim=shape,
+              inputs=[wp.vec3(*(origin - surface.base)), h, wp.vec3(*axis),
+                      float(heights[0]), float(heights[1] - heights[0]),
+                      wp.array(radii.astype(np.float32), dtype=float, device=device),
+                      wp.array(surface.slopes().astype(np.float32), dtype=float,
+                               device=device)],
+              outputs=[out], device=device)
+    idx = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), axis=-1)
+    exact = surface.value((origin + h * idx).reshape(-1, 3)).reshape(shape)
+    assert np.abs(out.numpy() - exact).max() < 1e-5
+    assert (exact < 0).any() and (exact > 0).any()
+
+
+def test_a_cylinder_profile_is_met_where_a_cylinder_is():
+    heights = np.linspace(-1.0, 1.0, 41)
+    cylinder = SurfaceOfRevolution(np.zeros(3), np.array([0.0, 0.0, 1.0]), heights,
+                                   np.full(41, 0.5))
+    origins = np.array([[2.0, 0.0, 0.2], [2.0, 0.3, -0.4], [2.0, 0.8, 0.0]])
+    dirs = np.array([[-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    hits, inside = cylinder.intersect(origins, dirs, np.full(3, -1.0), np.full(3, 1.0),
+                                      step=0.02)
+    assert inside.tolist() == [True, True, False]
+    np.testing.assert_allclose(hits[0], [0.5, 0.0, 0.2], atol=1e-6)
+    np.testing.assert_allclose(hits[1], [0.4, 0.3, -0.4], atol=1e-6)
+    np.testing.assert_allclose(cylinder.gradient(hits[:1]), [[1.0, 0.0, 0.0]], atol=1e-9)
+    # the tracer alone, on a plane: the first crossing, not the last
+    hits, inside = first_crossing(lambda x: x[:, 0] - 0.25, origins, dirs, np.full(3, -1.0),
+                                  np.full(3, 1.0), step=0.02)
+    assert inside.all() and np.allclose(hits[:, 0], 0.25)
+
+
+def test_the_bottle_starts_from_a_surface_of_revolution():
+    """Default options, a coarse grid: the start is the surface of revolution, the tube open at
+    both ends (Euler number 0), the false highlights rejected, within half a voxel."""
+    synthetic = make_scene("bottle", outliers=0.1)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=32, device="cpu")
+    assert solver.fit_report.shape == "revolution"
+    solver.run(20)
+    result = solver.result()
+    assert result.mesh.euler_number == 0
+    assert sorted(r["index"] for r in result.rejected) == \
+        np.flatnonzero(synthetic.outlier_mask).tolist()
+    err = np.abs(synthetic.surface.implicit(result.vertices))
+    assert err.mean() < 0.5 * result.grid.spacing
