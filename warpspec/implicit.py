@@ -41,6 +41,7 @@ from ._parallel import launch_halves
 from .geometry import LIGHT_CAMERA, LIGHT_POINT, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
+from .normal_lines import best_axis
 
 __all__ = ["FitReport", "ImplicitStart", "fill_pockets", "first_guess", "level_ladder",
            "ray_convergence"]
@@ -630,13 +631,35 @@ class ImplicitStart:
                                        "a ring torus fitted to the highlights' normal lines")
 
     def _revolution(self, guess: Guess) -> R.SurfaceOfRevolution | None:
-        """A surface of revolution that meets the normals as a quadric start must, or ``None``."""
-        def fit(starts: np.ndarray, dirs: np.ndarray) -> R.SurfaceOfRevolution | None:
-            return R.fit_revolution(starts, dirs, self.scene.points, lo=self.grid.origin,
-                                    hi=self.grid.upper, voxel=self.grid.spacing)[0]
+        """A surface of revolution that meets the normals as a quadric start must, or ``None``.
 
-        return self._from_normal_lines(
-            guess, fit, "a surface of revolution fitted to the highlights' normal lines")
+        By flash the rays are its normal lines (:func:`warpspec.revolution.fit_revolution`);
+        under other lights the axis is first guessed from the normal lines through the rays'
+        hits on the quadric, then found from the rays themselves
+        (:func:`warpspec.revolution.fit_revolution_lit`).
+        """
+        lo, hi, voxel = self.grid.origin, self.grid.upper, self.grid.spacing
+        origins, dirs, codes, _ = self._rays
+        if np.all(codes == LIGHT_CAMERA):
+            def fit(starts: np.ndarray, inward: np.ndarray) -> R.SurfaceOfRevolution | None:
+                return R.fit_revolution(starts, inward, self.scene.points, lo=lo, hi=hi,
+                                        voxel=voxel)[0]
+
+            return self._from_normal_lines(
+                guess, fit, "a surface of revolution fitted to the highlights' normal lines")
+        if guess.kind != "sphere" or len(origins) < R.MIN_RAYS or not self.scene.num_points:
+            return None
+        self._say("a surface of revolution fitted to the highlights")
+        hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
+        normals = self.scene.normals(hits)
+        if int(inside.sum()) < R.MIN_RAYS:
+            return None
+        c, a = best_axis(hits[inside], normals[inside])
+        if c is None:
+            return None
+        shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo, hi=hi,
+                                     voxel=voxel, axis=(c, a))
+        return None if shape is None else self._accept(shape)
 
     def _from_normal_lines(self, guess: Guess, fit: Callable, message: str):
         """A shape fitted to the highlights' normal lines, if it is the start by itself.
@@ -656,7 +679,6 @@ class ImplicitStart:
         origins, dirs, codes, _ = self._rays
         lo, hi = self.grid.origin, self.grid.upper
         outside = 2.0 * float(np.max(hi - lo))
-        points = self.scene.points.reshape(-1, 3)
         flash = codes == LIGHT_CAMERA
         hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
         shape = None
@@ -669,6 +691,19 @@ class ImplicitStart:
             if shape is None:
                 return None
             hits, inside = shape.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
+        return self._accept(shape, hits, inside)
+
+    def _accept(self, shape, hits: np.ndarray | None = None, inside: np.ndarray | None = None):
+        """``shape`` if it is the start by itself (:meth:`_shape_suffices`), else ``None``.
+
+        ``hits`` and ``inside``: the rays' crossings with it, when already traced. Sets the rays'
+        residuals and weights (the rays it misses by more than REJECT_DEG are rejected).
+        """
+        origins, dirs, _, _ = self._rays
+        points = self.scene.points.reshape(-1, 3)
+        if hits is None:
+            hits, inside = shape.intersect(origins, dirs, self.grid.origin, self.grid.upper,
+                                           step=self.grid.spacing)
         if not inside.any():
             return None
         cos = np.clip(np.einsum("ij,ij->i", shape.gradient(hits), self.scene.normals(hits)),

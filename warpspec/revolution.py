@@ -1,8 +1,9 @@
 """A surface of revolution fitted to the normal lines of highlights: bottles, vases, cans.
 
 Every normal line of a surface of revolution meets its axis. With a flash at the camera a
-highlight's ray is a normal line; under another light the implicit start passes the normal line
-through the ray's current hit, fitting and intersecting in turn (as for the torus). Rotational
+highlight's ray is a normal line (:func:`fit_revolution`); under another light each ray has one
+point whose normal line meets a given axis, and the axis is the one that makes those points one
+smooth profile (:func:`fit_revolution_lit`). Rotational
 symmetry makes sparse data go far: each point gives the profile's radius at its height all the
 way round, and each normal line the profile's slope where it meets the profile. The fit
 (docs/DESIGN.md section 7):
@@ -31,7 +32,7 @@ import numpy as np
 from .geometry import plane_frame
 from .normal_lines import best_axis, first_crossing
 
-__all__ = ["SurfaceOfRevolution", "fit_revolution"]
+__all__ = ["SurfaceOfRevolution", "fit_revolution", "fit_revolution_lit"]
 
 MIN_RAYS = 12
 """Fewest normal lines near one axis a surface of revolution is fitted to."""
@@ -53,6 +54,21 @@ POINT_WEIGHT = 20.0
 """Weight of a point's radius error in voxels, against 1 for a unit error of a line's slope."""
 SLOPE_LIMIT_DEG = 20.0
 """Tukey limit of a line's slope weight (the angle between its direction and the normal)."""
+LIT_STARTS = 6
+"""Under other lights: axis directions tried around the first guess, besides the guess..."""
+LIT_TILT_DEG = 6.0
+"""...each this far from it."""
+LIT_SCALE = 0.1
+"""Scale of the Cauchy loss on the profile fit's residuals when the axis is refined."""
+LIT_STAGES = ((2.0, 1e-4), (1.0, 1e-6))
+"""Knot spacing (voxels) and smoothness of each stage of an axis' refinement: a stiff profile
+on coarse knots first (a smoother cost), then a supple one."""
+LIT_NO_HIT = 10.0
+"""Residual of a ray that has no hit for an axis (its normal line cannot meet it)."""
+LIT_ROUNDS = 4
+"""Reweighing rounds of the final profile under other lights."""
+LIT_LIMIT_VOXELS = 2.0
+"""Tukey limit of a ray's radius miss (voxels) in the final profile under other lights."""
 
 
 @dataclass(frozen=True)
@@ -178,13 +194,8 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
         near = dist <= np.clip(spread, AXIS_FLOOR * voxel, AXIS_VOXELS * voxel)
         if near.sum() < MIN_RAYS:
             return None, near
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])], dtype=np.float64)
-    span = (corners - c) @ a
-    step = KNOT_VOXELS * voxel
-    count = int(np.ceil((span.max() - span.min()) / step)) + 1
-    heights = span.min() + step * np.arange(count)
-    profile = SurfaceOfRevolution(c, a, heights, np.zeros(count))
+    heights = _knots(c, a, lo, hi, KNOT_VOXELS * voxel)
+    profile = SurfaceOfRevolution(c, a, heights, np.zeros(len(heights)))
     ph, prho, _ = profile.split(pts)
     keep = (ph >= heights[0]) & (ph <= heights[-1])
     if not keep.any():
@@ -194,63 +205,252 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     return SurfaceOfRevolution(c, a, heights, radii), near
 
 
-def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
-                 p: np.ndarray, n: np.ndarray, *, scale: float, voxel: float) -> np.ndarray:
-    """The profile's radii: points' radii, lines' slopes where they meet it, smooth."""
-    heights = profile.heights
+def _knots(c: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+           step: float) -> np.ndarray:
+    """Heights ``step`` apart along the axis ``(c, a)`` that span the domain ``[lo, hi]``."""
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])], dtype=np.float64)
+    span = (corners - c) @ a
+    count = int(np.ceil((span.max() - span.min()) / step)) + 1
+    return span.min() + step * np.arange(count)
+
+
+def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
+                   values: tuple[np.ndarray, np.ndarray, np.ndarray],
+                   slopes: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares radii on the knots ``heights``, and the data rows' residuals.
+
+    Args:
+        heights: The knots (evenly spaced).
+        scale: The domain's size (heights and radii are measured in it: scale-free).
+        smoothness: Weight of the third-order energy.
+        values: Heights, radii and weights of radius data (``w (r(h) - radius)``).
+        slopes: Heights, the normal's components along the axis and outward, and weights of
+            slope data (``w (n_h + n_r r'(h))``).
+    """
     count = len(heights)
     step = heights[1] - heights[0]
-    # heights and radii in units of the domain's size: the smoothness weight is scale-free
     k = step / scale
-    d3 = np.diff(np.eye(count), n=3, axis=0) / k**3
-    smooth = np.sqrt(PROFILE_SMOOTHNESS * k) * d3 / scale
+    smooth = np.sqrt(smoothness * k) * np.diff(np.eye(count), n=3, axis=0) / k**3 / scale
 
-    def rows_at(h: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def cells(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         u = np.clip((h - heights[0]) / step, 0.0, count - 1 - 1e-9)
         i = np.floor(u).astype(int)
-        return i, u - i, np.ones_like(u)
+        return i, u - i
 
-    radii = np.full(count, float(np.median(prho)))
+    vh, vr, vw = values
+    sh, snh, snr, sw = slopes
+    A = np.zeros((len(vh) + len(sh), count))
+    b = np.zeros(len(A))
+    i, t = cells(vh)
+    rows = np.arange(len(vh))
+    A[rows, i] = vw * (1.0 - t)
+    A[rows, i + 1] = vw * t
+    b[rows] = vw * vr
+    i, _ = cells(sh)
+    rows = len(vh) + np.arange(len(sh))
+    A[rows, i] = -sw * snr / step
+    A[rows, i + 1] = sw * snr / step
+    b[rows] = -sw * snh
+    radii = np.linalg.lstsq(np.vstack([A, smooth]), np.r_[b, np.zeros(len(smooth))],
+                            rcond=None)[0]
+    return radii, A @ radii - b
+
+
+def _straight_ends(heights: np.ndarray, radii: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """Beyond its outermost data the profile goes straight on (clipped at the axis).
+
+    The third-order energy would carry the curvature on there (a neck closing on the axis).
+    """
+    count = len(heights)
+    step = heights[1] - heights[0]
+    first = int(np.clip(np.searchsorted(heights, seen.min()), 1, count - 2))
+    last = int(np.clip(np.searchsorted(heights, seen.max()), 1, count - 2))
+    radii = radii.copy()
+    slope = np.gradient(radii, step)
+    radii[:first] = radii[first] + slope[first] * (heights[:first] - heights[first])
+    radii[last + 1:] = radii[last] + slope[last] * (heights[last + 1:] - heights[last])
+    return np.maximum(radii, 0.0)
+
+
+def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
+                 p: np.ndarray, n: np.ndarray, *, scale: float, voxel: float,
+                 normals: np.ndarray | None = None, radii: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """The profile's radii: points' radii, the rays' normals where they meet it, smooth.
+
+    Rays ``p + s n`` (``n`` inward) are traced to the current profile; the outward normal
+    asked there is ``-n`` (a normal line) unless ``normals`` are given. ``radii``: the first
+    profile (else a cylinder through the points' median radius).
+    """
+    heights = profile.heights
+    if radii is None:
+        radii = np.full(len(heights), float(np.median(prho)))
+    outward = -n if normals is None else normals
     weights = np.ones(len(p))
     far = 2.0 * scale
+    points = (ph, prho, np.full(len(ph), POINT_WEIGHT / voxel))
     for round_ in range(PROFILE_ROUNDS):
         current = SurfaceOfRevolution(profile.base, profile.axis, heights, radii)
         hits, met = first_crossing(current.value, p, n, p - far * n, p + far * n,
                                    step=voxel, safety=0.5)
         hh, _, e = current.split(hits)
-        # the outward normal (-n) in the meridian plane: nh + nr r' = 0 along the profile
-        nh, nr = -(n @ profile.axis), -np.einsum("ij,ij->i", n, e)
+        # the outward normal in the meridian plane: nh + nr r' = 0 along the profile
+        nh, nr = outward @ profile.axis, np.einsum("ij,ij->i", outward, e)
         use = met & (weights > 0.0) & (hh >= heights[0]) & (hh <= heights[-1])
-        A = np.zeros((len(ph) + int(use.sum()), count))
-        b = np.zeros(len(A))
-        i, t, _ = rows_at(ph)
-        rows = np.arange(len(ph))
-        w = POINT_WEIGHT / voxel
-        A[rows, i] = w * (1.0 - t)
-        A[rows, i + 1] = w * t
-        b[: len(ph)] = w * prho
-        i, _, _ = rows_at(hh[use])
-        rows = len(ph) + np.arange(int(use.sum()))
-        sw = np.sqrt(weights[use])
-        A[rows, i] = -sw * nr[use] / step
-        A[rows, i + 1] = sw * nr[use] / step
-        b[rows] = -sw * nh[use]
-        radii = np.linalg.lstsq(np.vstack([A, smooth]), np.r_[b, np.zeros(len(smooth))],
-                                rcond=None)[0]
+        radii, _ = _solve_profile(
+            heights, scale=scale, smoothness=PROFILE_SMOOTHNESS, values=points,
+            slopes=(hh[use], nh[use], nr[use], np.sqrt(weights[use])))
         radii = np.maximum(radii, 0.0)
         # Tukey weights of the slopes' angles on the new profile
         current = SurfaceOfRevolution(profile.base, profile.axis, heights, radii)
-        cos = np.abs(np.einsum("ij,ij->i", current.gradient(hits), n))
+        cos = np.abs(np.einsum("ij,ij->i", current.gradient(hits), outward))
         angle = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
         # every line counts fully until the profile has taken its shape, then robustly
         tukey = np.where(angle < SLOPE_LIMIT_DEG, (1.0 - (angle / SLOPE_LIMIT_DEG) ** 2) ** 2, 0.0)
         weights = np.where(met, tukey if round_ >= PROFILE_ROUNDS // 2 else 1.0, 0.0)
-    # beyond the data the third-order energy would carry the curvature on (a neck closing
-    # on the axis); the profile goes straight on from its last datum instead
-    seen = np.r_[ph, hh[met & (weights > 0.0)]]
-    first = int(np.clip(np.searchsorted(heights, seen.min()), 1, count - 2))
-    last = int(np.clip(np.searchsorted(heights, seen.max()), 1, count - 2))
-    slope = np.gradient(radii, step)
-    radii[:first] = radii[first] + slope[first] * (heights[:first] - heights[first])
-    radii[last + 1:] = radii[last] + slope[last] * (heights[last + 1:] - heights[last])
-    return np.maximum(radii, 0.0)
+    return _straight_ends(heights, radii, np.r_[ph, hh[met & (weights > 0.0)]])
+
+
+def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
+                       points: np.ndarray, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
+                       axis: tuple[np.ndarray, np.ndarray]) -> SurfaceOfRevolution | None:
+    """Fit a surface of revolution to rays whose normals are known but are no normal lines.
+
+    Under a light that is not at the camera a ray is not a normal line, but given the axis
+    each ray has one point whose normal line meets it: that is its hit, which gives the
+    profile's radius and slope there. The axis is the one that makes every ray's point, the
+    surface points and the slopes one smooth profile: robust least squares of the profile fit's
+    residuals over the axis, from ``axis`` and :data:`LIT_STARTS` directions tilted
+    :data:`LIT_TILT_DEG` from it, each refined stiff then supple (:data:`LIT_STAGES`); the
+    least costly wins.
+
+    Args:
+        origins: Ray origins ``(M, 3)``.
+        dirs: Unit ray directions ``(M, 3)``.
+        normals: The normal the reflection law asks of each ray ``(M, 3)``.
+        points: Surface points ``(P, 3)``.
+        lo: The domain's lower corner.
+        hi: The domain's upper corner.
+        voxel: The grid's spacing.
+        axis: A first guess of the axis (a point, a unit direction).
+
+    Returns:
+        The surface, or ``None`` when fewer than :data:`MIN_RAYS` rays or no point are given.
+    """
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(o) < MIN_RAYS or len(pts) == 0:
+        return None
+    scale = float(np.max(np.asarray(hi) - np.asarray(lo)))
+    data = {"o": o, "d": d, "nrm": nrm, "pts": pts, "lo": lo, "hi": hi, "voxel": voxel,
+            "scale": scale}
+    c0, a0 = np.asarray(axis[0], dtype=np.float64), np.asarray(axis[1], dtype=np.float64)
+    u, w = plane_frame(a0)[:2]
+    tilt = np.tan(np.radians(LIT_TILT_DEG))
+    starts = [a0] + [a0 + tilt * (np.cos(t) * u + np.sin(t) * w)
+                     for t in np.linspace(0.0, 2.0 * np.pi, LIT_STARTS, endpoint=False)]
+    best = None
+    for a in starts:
+        c, a = c0, a / np.linalg.norm(a)
+        for knot, smoothness in LIT_STAGES:
+            c, a, cost = _refine_lit_axis(c, a, knot=knot, smoothness=smoothness, **data)
+        if best is None or cost < best[0]:
+            best = (cost, c, a)
+    _, c, a = best
+    heights = _knots(c, a, lo, hi, KNOT_VOXELS * voxel)
+    hits, ok = _lit_hits(c, a, o, d, nrm)
+    if ok.sum() < MIN_RAYS:
+        return None
+    weights = np.ones(int(ok.sum()))
+    for _ in range(LIT_ROUNDS):
+        radii, residual = _lit_profile(c, a, heights, hits[ok], nrm[ok], pts, weights,
+                                       scale=scale, voxel=voxel,
+                                       smoothness=PROFILE_SMOOTHNESS)
+        # Tukey weights of each ray's radius miss, in voxels
+        miss = np.abs(residual[len(pts):len(pts) + len(weights)]) / np.maximum(
+            np.sqrt(weights), 1e-12)
+        weights = np.where(miss < LIT_LIMIT_VOXELS, (1.0 - (miss / LIT_LIMIT_VOXELS) ** 2) ** 2,
+                           0.0)
+    # then, as by flash, the normals asked where the rays meet the profile (a ray's own hit
+    # above moves with the noise of its direction)
+    frame = SurfaceOfRevolution(c, a, heights, radii)
+    ph, prho, _ = frame.split(pts)
+    keep = (ph >= heights[0]) & (ph <= heights[-1])
+    kept = np.flatnonzero(ok)[weights > 0.0]  # the rays whose hits the profile holds
+    radii = _fit_profile(frame, ph[keep], prho[keep], o[kept], d[kept], scale=scale,
+                         voxel=voxel, normals=nrm[kept], radii=np.maximum(radii, 0.0))
+    return SurfaceOfRevolution(c, a, heights, radii)
+
+
+def _lit_hits(c: np.ndarray, a: np.ndarray, o: np.ndarray, d: np.ndarray,
+              nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point of each ray whose normal line meets the axis, and whether there is one.
+
+    Solves ``o + t d + s N = c + v a``; the hit lies ahead of the camera (``t > 0``) and the
+    axis behind the surface (``s < 0``).
+    """
+    A = np.stack([d, nrm, -np.broadcast_to(a, d.shape)], axis=2)
+    ok = np.abs(np.linalg.det(A)) > 1e-6
+    sol = np.zeros((len(d), 3))
+    if ok.any():
+        sol[ok] = np.linalg.solve(A[ok], (c - o)[ok][..., None])[..., 0]
+    ok &= (sol[:, 0] > 0.0) & (sol[:, 1] < 0.0)
+    return o + sol[:, :1] * d, ok
+
+
+def _lit_profile(c: np.ndarray, a: np.ndarray, heights: np.ndarray, hits: np.ndarray,
+                 nrm: np.ndarray, pts: np.ndarray, weights: np.ndarray, *, scale: float,
+                 voxel: float, smoothness: float) -> tuple[np.ndarray, np.ndarray]:
+    """The profile through the points and the rays' hits with their slopes.
+
+    Returns the radii and the residuals: radii in voxels (points weighed by POINT_WEIGHT,
+    then the hits), then the slopes (in units of the normal).
+    """
+    frame = SurfaceOfRevolution(c, a, heights, np.zeros(len(heights)))
+    hh, hr, e = frame.split(hits)
+    ph, pr, _ = frame.split(pts)
+    sw = np.sqrt(weights)
+    values = (np.r_[ph, hh], np.r_[pr, hr],
+              np.r_[np.full(len(ph), POINT_WEIGHT / voxel), sw / voxel])
+    slopes = (hh, nrm @ a, np.einsum("ij,ij->i", nrm, e), sw)
+    return _solve_profile(heights, scale=scale, smoothness=smoothness, values=values,
+                          slopes=slopes)
+
+
+def _lit_residuals(c: np.ndarray, a: np.ndarray, o: np.ndarray, d: np.ndarray,
+                   nrm: np.ndarray, pts: np.ndarray, *, lo: np.ndarray, hi: np.ndarray,
+                   voxel: float, scale: float, knot: float, smoothness: float) -> np.ndarray:
+    """The profile fit's residuals for the axis ``(c, a)``: points, rays' radii, slopes."""
+    heights = _knots(c, a, lo, hi, knot * voxel)
+    hits, ok = _lit_hits(c, a, o, d, nrm)
+    out = np.full(len(pts) + 2 * len(o), LIT_NO_HIT)  # a ray without a hit costs
+    _, res = _lit_profile(c, a, heights, hits[ok], nrm[ok], pts, np.ones(int(ok.sum())),
+                          scale=scale, voxel=voxel, smoothness=smoothness)
+    index = np.flatnonzero(ok)
+    out[: len(pts)] = res[: len(pts)]
+    out[len(pts) + index] = res[len(pts): len(pts) + len(index)]
+    out[len(pts) + len(o) + index] = res[len(pts) + len(index):]
+    return out
+
+
+def _refine_lit_axis(c: np.ndarray, a: np.ndarray, *, knot: float, smoothness: float,
+                     **data) -> tuple[np.ndarray, np.ndarray, float]:
+    """The axis near ``(c, a)`` whose rays' hits and points make the smoothest profile."""
+    from scipy.optimize import least_squares
+
+    u, w = plane_frame(a)[:2]
+    voxel = data["voxel"]
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        direction = a + x[2] * u + x[3] * w
+        return c + voxel * (x[0] * u + x[1] * w), direction / np.linalg.norm(direction)
+
+    fit = least_squares(
+        lambda x: _lit_residuals(*unpack(x), knot=knot, smoothness=smoothness, **data),
+        np.zeros(4), loss="cauchy", f_scale=LIT_SCALE, diff_step=1e-3)
+    cx, ax = unpack(fit.x)
+    return cx, ax, float(fit.cost)
