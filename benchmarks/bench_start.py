@@ -2,11 +2,12 @@
 
 For each synthetic scene of the shape classes (seed 0) and the paper's octant, at one grid
 (default 64) with the default options: the set-up's stages as the implicit start announces
-them (the quadric; the ring torus, tried when the cameras stand all around; the robust passes
-on the coarse grids; the ladder of grid fits, and the ladder again when rejected highlights come
-back), the rest of the set-up (redistance, the band, the device arrays), the flow's iterations
-(as many as the grid's schedule gives) and the meshing. Seconds, medians of ``--repeats`` runs
-in one process, after one untimed run that loads the kernels.
+them (the quadric; the ring torus and the surface of revolution, tried when the cameras stand
+all around; the robust passes on the coarse grids; the ladder of grid fits, and the ladder
+again when rejected highlights come back), the rest of the set-up (redistance, the band, the
+device arrays), the flow's iterations (as many as the grid's schedule gives) and the meshing.
+Seconds, medians of ``--repeats`` runs in one process, after one untimed run that loads the
+kernels.
 
     python benchmarks/bench_start.py [--resolution 64] [--repeats 1] [--device cpu]
     python benchmarks/bench_start.py --smoke      # 16^3, two scenes: checks the script
@@ -23,13 +24,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 SCENES = ("octant", "sphere-around", "ellipsoid-around", "torus", "torus-lamps", "bottle",
-          "wrap", "freeform", "point-light")
-STAGES = ("quadric", "torus", "robust passes", "grid fit", "grid fit again", "other set-up",
-          "iterations", "meshing", "total")
+          "bottle-lamps", "wrap", "freeform", "point-light")
+STAGES = ("quadric", "torus", "revolution", "robust passes", "grid fit", "grid fit again",
+          "other set-up", "iterations", "meshing", "total")
 
 
 def _stage(text: str) -> str:
     for prefix, name in (("a quadric", "quadric"), ("a ring torus", "torus"),
+                         ("a surface of revolution", "revolution"),
                          ("robust pass", "robust passes"), ("grid ", "grid fit"),
                          ("the ladder again", "grid fit again"),
                          ("the start redistanced", "other set-up")):

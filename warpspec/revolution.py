@@ -60,7 +60,7 @@ LIT_TILT_DEG = 6.0
 """...each this far from it."""
 LIT_SCALE = 0.1
 """Scale of the Cauchy loss on the profile fit's residuals when the axis is refined."""
-LIT_STAGES = ((2.0, 1e-4), (1.0, 1e-6))
+LIT_STAGES = ((2.0, 1e-4), (1.0, 1e-6), (0.5, 1e-6))
 """Knot spacing (voxels) and smoothness of each stage of an axis' refinement: a stiff profile
 on coarse knots first (a smoother cost), then a supple one."""
 LIT_NO_HIT = 10.0
