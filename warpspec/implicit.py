@@ -482,17 +482,9 @@ class ImplicitStart:
                               wp.vec3(*(float(v) for v in t.axis)), float(t.R), float(t.r)],
                       outputs=[out], device=self.device)
         elif (revolution := self._revolution(guess)) is not None:
-            self.revolution = rev = revolution
+            self.revolution = revolution
             shape = "revolution"
-            start = np.asarray(self.grid.origin, dtype=np.float64) - rev.base
-            as_array = lambda v: wp.array(np.asarray(v, dtype=np.float32), dtype=float,  # noqa: E731
-                                          device=self.device)
-            wp.launch(K.revolution_field, dim=self.grid.shape,
-                      inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
-                              wp.vec3(*(float(v) for v in rev.axis)), float(rev.heights[0]),
-                              float(rev.heights[1] - rev.heights[0]), as_array(rev.radii),
-                              as_array(rev.slopes())],
-                      outputs=[out], device=self.device)
+            self._revolution_field(revolution, out)
         else:
             if guess.kind == "plane" and self.quadric.sheets_crossed(
                     *self.scene.rays(), lo, hi) > 1:
@@ -660,6 +652,20 @@ class ImplicitStart:
         shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo, hi=hi,
                                      voxel=voxel, axis=(c, a))
         return None if shape is None else self._accept(shape)
+
+    def _revolution_field(self, rev: R.SurfaceOfRevolution, out: wp.array) -> None:
+        """The surface of revolution's first-order distance on the grid."""
+        start = np.asarray(self.grid.origin, dtype=np.float64) - rev.base
+
+        def as_array(v: np.ndarray) -> wp.array:
+            return wp.array(np.asarray(v, dtype=np.float32), dtype=float, device=self.device)
+
+        wp.launch(K.revolution_field, dim=self.grid.shape,
+                  inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
+                          wp.vec3(*(float(v) for v in rev.axis)), float(rev.heights[0]),
+                          float(rev.heights[1] - rev.heights[0]), as_array(rev.radii),
+                          as_array(rev.slopes())],
+                  outputs=[out], device=self.device)
 
     def _from_normal_lines(self, guess: Guess, fit: Callable, message: str):
         """A shape fitted to the highlights' normal lines, if it is the start by itself.
