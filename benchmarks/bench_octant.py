@@ -85,9 +85,9 @@ try:
 
     _level_init = _imp._Level.__init__
 
-    def level_init(self, grid, device):
+    def level_init(self, grid, device, **options):
         split["levels"].append([max(grid.shape) - 1, time.perf_counter()])
-        _level_init(self, grid, device)
+        _level_init(self, grid, device, **options)
 
     _imp._Level.__init__ = level_init
 except (ImportError, AttributeError):

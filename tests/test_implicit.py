@@ -409,3 +409,25 @@ def test_fill_pockets_removes_sealed_regions_and_keeps_the_sheet(device):
     phi = _field(sheet, device)
     assert fill_pockets(phi, both=True) == 0
     assert np.array_equal(phi.numpy(), sheet.astype(np.float32))
+
+
+def test_cameras_surround_only_when_no_half_space_holds_them():
+    """A camera a little below the horizon of a patch seen from above does not surround it
+    (the mean direction would say it does); rings all around, and a tube's rings, do."""
+    from warpspec.implicit import surrounds
+
+    az = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    dome = np.stack([np.cos(az), np.sin(az), np.full(12, 0.4)], axis=1)
+    dome = np.concatenate([dome, [[0.9, 0.0, -0.1], [0.0, 0.0, 1.0]]])
+    dome = np.concatenate([dome[:12] * [0.2, 0.2, 1.0], dome[12:]])  # mostly overhead
+    dome /= np.linalg.norm(dome, axis=1, keepdims=True)
+    m = dome.sum(axis=0) / np.linalg.norm(dome.sum(axis=0))
+    assert np.min(dome @ m) < 0.0  # the mean direction's test would call it surrounded
+    assert not surrounds(dome)
+    ring = np.stack([np.cos(az), np.sin(az), np.full(12, -0.1)], axis=1)
+    assert surrounds(np.concatenate([ring, ring * [1.0, 1.0, -3.0]]))
+    assert not surrounds(np.zeros((0, 3)))
+    # a free-form patch whose lowest cameras stand a little below its horizon
+    scene = make_scene("freeform", seed=6).scene()
+    grid = Grid.from_bounds(*scene.domain, resolution=16)
+    assert first_guess(scene, grid, initial_plane(scene, grid)).kind == "plane"

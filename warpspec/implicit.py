@@ -44,7 +44,7 @@ from .kernels import implicit as K
 from .normal_lines import best_axis
 
 __all__ = ["FitReport", "ImplicitStart", "fill_pockets", "first_guess", "level_ladder",
-           "ray_convergence"]
+           "ray_convergence", "sphere_guess", "surrounds"]
 
 MIN_CONSTRAINTS = 3
 """Fewest rays entering the domain plus points below which nothing is fitted."""
@@ -94,8 +94,11 @@ GRAPH_NODES = 100_000
 there); larger ones launch directly, their stencils in two slabs on two CPU cores."""
 CG_TOLERANCE = 1e-5
 """Stop a fit when the residual norm has fallen by this factor."""
-SMOOTHNESS = 0.002
-"""Weight of the Hessian energy per unit of the domain's length (``lam = SMOOTHNESS h / L``)."""
+SMOOTHNESS = 0.02
+"""Weight of the Hessian energy per unit of the domain's length (``lam = SMOOTHNESS h / L``) in
+the final fit. Beside the third-order energy it holds the long waves, which the third order
+leaves almost free: at 0.002 (and 0.01) a free-form patch seen by cameras near its horizon grew
+a ridge 5 voxels high that met every normal."""
 THIRD = 1e-4
 """Weight of the third-order energy ``|D^3 f|^2`` (``lam3 = THIRD L / h``) of the final fit."""
 POINT_WEIGHT = 20.0
@@ -142,6 +145,24 @@ def ray_convergence(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray | None:
     return x
 
 
+def surrounds(directions: np.ndarray) -> bool:
+    """Whether unit ``directions`` ``(K, 3)`` leave no open half-space holding them all.
+
+    Cameras seen from the rays' convergence point in such directions stand all around it. A
+    linear feasibility problem (scipy's HiGHS): one side when some ``m`` has ``u . m >= 1``
+    for every direction ``u``. The mean direction is no such test: a camera a little below
+    the horizon of a patch seen from above would call it surrounded.
+    """
+    from scipy.optimize import linprog
+
+    u = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    if len(u) == 0:
+        return False
+    fit = linprog(np.zeros(3), A_ub=-u, b_ub=-np.ones(len(u)), bounds=[(None, None)] * 3,
+                  method="highs")
+    return fit.status == 2  # infeasible: no half-space holds them
+
+
 @dataclass
 class Guess:
     """A first guess: a sphere (closed) or a plane (open), in world units."""
@@ -150,6 +171,8 @@ class Guess:
     centre: np.ndarray
     radius: float = 0.0
     normal: np.ndarray | None = None
+    convergence: np.ndarray | None = None
+    """The point nearest to the rays (or the points' mean), whichever the kind."""
 
 
 def first_guess(scene, grid: Grid, plane: tuple[np.ndarray, np.ndarray]) -> Guess:
@@ -169,20 +192,22 @@ def first_guess(scene, grid: Grid, plane: tuple[np.ndarray, np.ndarray]) -> Gues
         c = scene.points.mean(axis=0) if scene.num_points else 0.5 * (lo + hi)
     u = centres[used] - c
     u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
-    m = u.sum(axis=0)
-    surrounded = True
-    if np.linalg.norm(m) > 1e-9:
-        m = m / np.linalg.norm(m)
-        surrounded = bool(np.min(u @ m) < 0.0)
-    if not surrounded:
-        return Guess("plane", np.asarray(plane[0], float), normal=np.asarray(plane[1], float))
+    if not surrounds(u):
+        return Guess("plane", np.asarray(plane[0], float), normal=np.asarray(plane[1], float),
+                     convergence=c)
+    return sphere_guess(scene, grid, c)
+
+
+def sphere_guess(scene, grid: Grid, c: np.ndarray) -> Guess:
+    """A sphere about ``c`` through the points (their median distance), inside the grid."""
+    lo, hi = grid.origin, grid.upper
     room = float(np.min(np.minimum(c - lo, hi - c)))
     if scene.num_points:
         radius = float(np.median(np.linalg.norm(scene.points - c, axis=1)))
     else:
         radius = 0.5 * room
     radius = min(max(radius, 2.0 * grid.spacing), max(room - grid.spacing, 2.0 * grid.spacing))
-    return Guess("sphere", c, radius=radius)
+    return Guess("sphere", c, radius=radius, convergence=c)
 
 
 @dataclass
@@ -456,6 +481,15 @@ class ImplicitStart:
         self._say(f"a quadric fitted to {self.m} rays and {self.scene.num_points} points")
         quad, self.weights, self.residual = Q.fit_quadric(
             self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing)
+        if guess.kind == "plane":
+            # a patch seen from one side may still be curved like a sphere seen from outside:
+            # the fit from a sphere through the points is kept when it meets more normals
+            ball = sphere_guess(self.scene, self.grid, guess.convergence)
+            other = Q.fit_quadric(self.scene, Q.sphere(ball.centre, ball.radius,
+                                                       frame_centre=frame, scale=scale),
+                                  lo=lo, hi=hi, voxel=self.grid.spacing)
+            if np.mean(other[2] <= QUADRIC_DEG) > np.mean(self.residual <= QUADRIC_DEG):
+                quad, self.weights, self.residual = other
         self.quadric = quad
         rounds, cg = [], []
         ladder: list[int] = []
@@ -530,7 +564,7 @@ class ImplicitStart:
                          cg_iterations=cg, distance=not ladder, pockets=pockets, shape=shape)
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
-                smoothness: float = SMOOTHNESS, third: float | None = None,
+                smoothness: float | None = None, third: float | None = None,
                 quiet: bool = False) -> _Level:
         """Fit on every level of the ladder, each started from the one below."""
         lo, hi = self.grid.origin, self.grid.upper
@@ -542,7 +576,8 @@ class ImplicitStart:
                 lo, hi, resolution=res)
             if not quiet:
                 self._say(f"grid {res} of {', '.join(map(str, ladder))}")
-            level = _Level(grid, self.device, smoothness=smoothness,
+            level = _Level(grid, self.device,
+                           smoothness=SMOOTHNESS if smoothness is None else smoothness,
                            third=THIRD if third is None else third)
             self._use_level_rays(level)
             self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
