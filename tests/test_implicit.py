@@ -39,27 +39,39 @@ def _shifted(f: np.ndarray, a: int, b: int, da: int, db: int) -> np.ndarray:
     return f[tuple(idx)]
 
 
+def _cross(f: np.ndarray, a: int, b: int) -> np.ndarray:
+    """The quarter cross difference along axes ``a`` and ``b`` on its interior nodes."""
+    return 0.25 * (_shifted(f, a, b, 1, 1) - _shifted(f, a, b, 1, -1)
+                   - _shifted(f, a, b, -1, 1) + _shifted(f, a, b, -1, -1))
+
+
 def _energy(f: np.ndarray) -> float:
     """Sum over interior stencils of the squared Hessian (mixed terms twice), in NumPy."""
     e = sum(float(np.sum(np.diff(f, n=2, axis=a) ** 2)) for a in range(3))
     for a, b in ((0, 1), (0, 2), (1, 2)):
-        cross = 0.25 * (_shifted(f, a, b, 1, 1) - _shifted(f, a, b, 1, -1)
-                        - _shifted(f, a, b, -1, 1) + _shifted(f, a, b, -1, -1))
-        e += 2.0 * float(np.sum(cross**2))
+        e += 2.0 * float(np.sum(_cross(f, a, b) ** 2))
     return e
+
+
+def _assert_half_gradient(op: np.ndarray, energy, f: np.ndarray, nodes, *, rel: float,
+                          abs: float) -> None:
+    """``op`` is half the gradient of ``energy`` at ``f``: central differences at ``nodes``
+    (exact for a quadratic energy)."""
+    for idx in nodes:
+        up, down = f.copy(), f.copy()
+        up[idx] += 1e-3
+        down[idx] -= 1e-3
+        numeric = (energy(up) - energy(down)) / 2e-3
+        assert op[idx] * 2.0 == pytest.approx(numeric, rel=rel, abs=abs)
 
 
 def test_hessian_operator_is_the_gradient_of_the_hessian_energy(device):
     """``D^T W D f`` is half the gradient of the energy: checked against finite differences."""
     rng = np.random.default_rng(0)
     f = rng.normal(size=(6, 7, 5))
-    op = _hessian_energy_operator(f, device)
-    for idx in [(0, 0, 0), (2, 3, 1), (5, 6, 4), (3, 0, 2), (1, 4, 4)]:
-        up, down = f.copy(), f.copy()
-        up[idx] += 1e-3
-        down[idx] -= 1e-3
-        numeric = (_energy(up) - _energy(down)) / 2e-3  # exact for a quadratic energy
-        assert op[idx] * 2.0 == pytest.approx(numeric, rel=1e-5, abs=1e-4)
+    _assert_half_gradient(_hessian_energy_operator(f, device), _energy, f,
+                          [(0, 0, 0), (2, 3, 1), (5, 6, 4), (3, 0, 2), (1, 4, 4)],
+                          rel=1e-5, abs=1e-4)
 
 
 def test_hessian_operator_vanishes_on_linear_fields_and_not_on_quadratics(device):
@@ -108,8 +120,7 @@ def _third_energy(f: np.ndarray) -> float:
         d2 = np.diff(f, n=2, axis=a)  # the component (a, a) on its interior nodes
         e += sum(float(np.sum(np.diff(d2, axis=b) ** 2)) for b in range(3))
     for a, b in ((0, 1), (0, 2), (1, 2)):
-        cross = 0.25 * (_shifted(f, a, b, 1, 1) - _shifted(f, a, b, 1, -1)
-                        - _shifted(f, a, b, -1, 1) + _shifted(f, a, b, -1, -1))
+        cross = _cross(f, a, b)
         e += 2.0 * sum(float(np.sum(np.diff(cross, axis=c) ** 2)) for c in range(3))
     return e
 
@@ -118,12 +129,9 @@ def test_third_order_operator_is_the_gradient_of_its_energy(device):
     rng = np.random.default_rng(1)
     f = rng.normal(size=(7, 6, 8))
     op = _third_energy_operator(f, device)
-    for idx in [(0, 0, 0), (3, 2, 4), (6, 5, 7), (1, 0, 3), (4, 5, 1)]:
-        up, down = f.copy(), f.copy()
-        up[idx] += 1e-3
-        down[idx] -= 1e-3
-        numeric = (_third_energy(up) - _third_energy(down)) / 2e-3
-        assert op[idx] * 2.0 == pytest.approx(numeric, rel=1e-4, abs=1e-3)
+    _assert_half_gradient(op, _third_energy, f,
+                          [(0, 0, 0), (3, 2, 4), (6, 5, 7), (1, 0, 3), (4, 5, 1)],
+                          rel=1e-4, abs=1e-3)
     # with both weights: the Hessian operator plus the third-order one
     both = _third_energy_operator(f, device, second=0.5, third=2.0)
     expected = 0.5 * _hessian_energy_operator(f, device) + 2.0 * op

@@ -246,24 +246,21 @@ _THIRD_DIAGONAL: dict[str, float] = {}
 
 
 def _third_diagonal(device) -> float:
-    """The third-order energy's diagonal at an interior node, ``|G D e|^2`` (computed once)."""
+    """The third-order energy's diagonal at an interior node, ``|G D e|^2`` (computed once).
+
+    The smooth operator of a small level, weights 0 and 1, applied to a unit spike.
+    """
+    device = wp.get_device(device)
     key = str(device)
     if key not in _THIRD_DIAGONAL:
-        shape = (9, 9, 9)
-        delta = np.zeros(shape, dtype=np.float32)
-        delta[4, 4, 4] = 1.0
-        x = wp.array(delta, dtype=float, device=device)
-        second = wp.zeros(shape, dtype=wp.vec3, device=device)
-        mixed = wp.zeros(shape, dtype=wp.vec3, device=device)
-        second3 = wp.zeros(shape, dtype=wp.vec3, device=device)
-        mixed3 = wp.zeros(shape, dtype=wp.vec3, device=device)
-        out = wp.zeros(shape, dtype=float, device=device)
-        wp.launch(K.hessian_terms, dim=shape, inputs=[0, x, second, mixed], device=device)
-        wp.launch(K.third_terms, dim=shape, inputs=[0, second, mixed, 0.0, 1.0, second3,
-                                                    mixed3], device=device)
-        wp.launch(K.hessian_adjoint, dim=shape, inputs=[0, second3, mixed3, x, 1.0, 0.0, out],
-                  device=device)
-        _THIRD_DIAGONAL[key] = float(out.numpy()[4, 4, 4])
+        n = 9
+        level = _Level(Grid(origin=np.zeros(3), spacing=1.0, shape=(n, n, n)), device,
+                       smoothness=0.0, third=1.0 / (n - 1))  # lam3 = third * (n - 1) = 1
+        spike = np.zeros((n, n, n), dtype=np.float32)
+        spike[n // 2, n // 2, n // 2] = 1.0
+        wp.copy(level.p, wp.array(spike, dtype=float, device=device))
+        level._smoothness(level.p, level.ap, 0.0)
+        _THIRD_DIAGONAL[key] = float(level.ap.numpy()[n // 2, n // 2, n // 2])
     return _THIRD_DIAGONAL[key]
 
 
@@ -508,13 +505,9 @@ class ImplicitStart:
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
             shape = "quadric"
         elif (torus := self._torus(guess)) is not None:
-            self.torus = t = torus
+            self.torus = torus
             shape = "torus"
-            start = np.asarray(self.grid.origin, dtype=np.float64) - t.centre
-            wp.launch(K.torus_field, dim=self.grid.shape,
-                      inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
-                              wp.vec3(*(float(v) for v in t.axis)), float(t.R), float(t.r)],
-                      outputs=[out], device=self.device)
+            self._torus_field(torus, out)
         elif (revolution := self._revolution(guess)) is not None:
             self.revolution = revolution
             shape = "revolution"
@@ -557,7 +550,7 @@ class ImplicitStart:
                                                                  != K.ANCHOR_NONE)
             wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[previous.f, previous.world_h],
                       outputs=[out], device=self.device)
-            pockets = fill_pockets(out, both=guess.kind == "plane")
+            pockets = fill_pockets(out, both=self._one_side)
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
@@ -687,6 +680,14 @@ class ImplicitStart:
         shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo, hi=hi,
                                      voxel=voxel, axis=(c, a))
         return None if shape is None else self._accept(shape)
+
+    def _torus_field(self, t: T.Torus, out: wp.array) -> None:
+        """The ring torus' exact distance on the grid."""
+        start = np.asarray(self.grid.origin, dtype=np.float64) - t.centre
+        wp.launch(K.torus_field, dim=self.grid.shape,
+                  inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
+                          wp.vec3(*(float(v) for v in t.axis)), float(t.R), float(t.r)],
+                  outputs=[out], device=self.device)
 
     def _revolution_field(self, rev: R.SurfaceOfRevolution, out: wp.array) -> None:
         """The surface of revolution's first-order distance on the grid."""
@@ -852,7 +853,8 @@ def fill_pockets(phi: wp.array, *, both: bool) -> int:
     one side hold a bubble: such a pocket is an overshoot of the fit between highlights (a
     ray that meets it first then holds it). Each face-connected region of ``phi > 0`` that
     touches no face of the grid has its sign flipped; with ``both`` (a surface seen from one
-    side) the regions of ``phi <= 0`` too. Runs once, on the host (scipy's labelling).
+    side) the regions of ``phi <= 0`` too. On the host (scipy's labelling), before each fit of
+    the ladder and on its result.
 
     Args:
         phi: The field on the grid, changed in place.

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Quadric", "fit_quadric"]
+__all__ = ["Quadric", "biweight", "fit_quadric"]
 
 ROUNDS = 25
 """Intersect-and-refit rounds."""
@@ -285,10 +285,15 @@ def robust_weights(angle: np.ndarray, live: np.ndarray, *, limit_deg: float,
     if not live.any():
         return np.zeros(len(angle))
     sigma = 1.4826 * float(np.median(angle[live]))
-    limit = max(tukey * sigma, limit_deg)
-    w = np.where(angle < limit, (1.0 - (angle / limit) ** 2) ** 2, 0.0)
+    w = biweight(angle, max(tukey * sigma, limit_deg))
     w[~live] = 0.0
     return w
+
+
+def biweight(residual: np.ndarray, limit: float) -> np.ndarray:
+    """Tukey's biweight ``(1 - (x / limit)^2)^2`` of the residuals, 0 from ``limit`` on."""
+    x = np.asarray(residual, dtype=np.float64)
+    return np.where(x < limit, (1.0 - (x / limit) ** 2) ** 2, 0.0)
 
 
 def sphere(centre: np.ndarray, radius: float, *, frame_centre: np.ndarray, scale: float

@@ -25,12 +25,14 @@ it does, as it would take a quadric.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from .geometry import plane_frame
 from .normal_lines import best_axis, first_crossing
+from .quadric import biweight
 
 __all__ = ["SurfaceOfRevolution", "fit_revolution", "fit_revolution_lit"]
 
@@ -135,6 +137,21 @@ def _line_axis_distance(c: np.ndarray, a: np.ndarray, p: np.ndarray,
     return np.where(length > 1e-9, skew, along)
 
 
+def _axis_moves(c: np.ndarray, a: np.ndarray, voxel: float
+                ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """The axis ``(c, a)`` moved by four numbers, for least squares in any unit.
+
+    The first two move its point across it, in voxels; the last two tilt its direction.
+    """
+    u, w = plane_frame(a)[:2]
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        direction = a + x[2] * u + x[3] * w
+        return c + voxel * (x[0] * u + x[1] * w), direction / np.linalg.norm(direction)
+
+    return unpack
+
+
 def _refine_axis(c: np.ndarray, a: np.ndarray, p: np.ndarray, n: np.ndarray,
                  voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """Robust least squares of the lines' distances from the axis, in voxels.
@@ -143,12 +160,7 @@ def _refine_axis(c: np.ndarray, a: np.ndarray, p: np.ndarray, n: np.ndarray,
     """
     from scipy.optimize import least_squares
 
-    u, w = plane_frame(a)[:2]
-
-    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d = a + x[2] * u + x[3] * w
-        return c + voxel * (x[0] * u + x[1] * w), d / np.linalg.norm(d)
-
+    unpack = _axis_moves(c, a, voxel)
     fit = least_squares(lambda x: _line_axis_distance(*unpack(x), p, n) / voxel, np.zeros(4),
                         loss="soft_l1", f_scale=0.5 * AXIS_VOXELS, max_nfev=200)
     return unpack(fit.x)
@@ -308,7 +320,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
         cos = np.abs(np.einsum("ij,ij->i", current.gradient(hits), outward))
         angle = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
         # every line counts fully until the profile has taken its shape, then robustly
-        tukey = np.where(angle < SLOPE_LIMIT_DEG, (1.0 - (angle / SLOPE_LIMIT_DEG) ** 2) ** 2, 0.0)
+        tukey = biweight(angle, SLOPE_LIMIT_DEG)
         weights = np.where(met, tukey if round_ >= PROFILE_ROUNDS // 2 else 1.0, 0.0)
     return _straight_ends(heights, radii, np.r_[ph, hh[met & (weights > 0.0)]])
 
@@ -373,8 +385,7 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
         # Tukey weights of each ray's radius miss, in voxels
         miss = np.abs(residual[len(pts):len(pts) + len(weights)]) / np.maximum(
             np.sqrt(weights), 1e-12)
-        weights = np.where(miss < LIT_LIMIT_VOXELS, (1.0 - (miss / LIT_LIMIT_VOXELS) ** 2) ** 2,
-                           0.0)
+        weights = biweight(miss, LIT_LIMIT_VOXELS)
     # then, as by flash, the normals asked where the rays meet the profile (a ray's own hit
     # above moves with the noise of its direction)
     frame = SurfaceOfRevolution(c, a, heights, radii)
@@ -442,13 +453,7 @@ def _refine_lit_axis(c: np.ndarray, a: np.ndarray, *, knot: float, smoothness: f
     """The axis near ``(c, a)`` whose rays' hits and points make the smoothest profile."""
     from scipy.optimize import least_squares
 
-    u, w = plane_frame(a)[:2]
-    voxel = data["voxel"]
-
-    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        direction = a + x[2] * u + x[3] * w
-        return c + voxel * (x[0] * u + x[1] * w), direction / np.linalg.norm(direction)
-
+    unpack = _axis_moves(c, a, data["voxel"])
     fit = least_squares(
         lambda x: _lit_residuals(*unpack(x), knot=knot, smoothness=smoothness, **data),
         np.zeros(4), loss="cauchy", f_scale=LIT_SCALE, diff_step=1e-3)
