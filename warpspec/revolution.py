@@ -379,12 +379,13 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
         return None
     weights = np.ones(int(ok.sum()))
     for _ in range(LIT_ROUNDS):
-        radii, residual = _lit_profile(c, a, heights, hits[ok], nrm[ok], pts, weights,
+        radii, _ = _lit_profile(c, a, heights, hits[ok], nrm[ok], pts, weights,
                                        scale=scale, voxel=voxel,
                                        smoothness=PROFILE_SMOOTHNESS)
-        # Tukey weights of each ray's radius miss, in voxels
-        miss = np.abs(residual[len(pts):len(pts) + len(weights)]) / np.maximum(
-            np.sqrt(weights), 1e-12)
+        # Tukey weights of each ray's radius miss, in voxels, the rays left out included (a
+        # left-out row's residual is zero, so it is measured on the profile itself)
+        hh, hr, _ = SurfaceOfRevolution(c, a, heights, radii).split(hits[ok])
+        miss = np.abs(np.interp(hh, heights, radii) - hr) / voxel
         weights = biweight(miss, LIT_LIMIT_VOXELS)
     # then, as by flash, the normals asked where the rays meet the profile (a ray's own hit
     # above moves with the noise of its direction)
