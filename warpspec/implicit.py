@@ -110,6 +110,8 @@ PROXIMITY = 1e-5
 SAMPLE_OFFSETS = (-0.5, 0.0, 0.5)
 """Gradient samples along each ray around its anchor, in voxel widths of the level."""
 SAMPLE_WEIGHTS = (0.5, 1.0, 0.5)
+COLUMNS = 33
+"""Lines per side of the sweep that checks a one-sided prior for a second sheet."""
 
 
 def level_ladder(resolution: int) -> list[int]:
@@ -173,6 +175,24 @@ class Guess:
     normal: np.ndarray | None = None
     convergence: np.ndarray | None = None
     """The point nearest to the rays (or the points' mean), whichever the kind."""
+
+
+def columns(normal: np.ndarray, lo: np.ndarray, hi: np.ndarray, *, count: int = COLUMNS
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Lines along ``-normal`` that sweep the box ``[lo, hi]`` (origins outside it, directions).
+
+    ``count`` by ``count`` lines, evenly spread over the box's shadow on the plane across
+    ``normal``.
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    e1, e2 = plane_frame(n)[:2]
+    centre = 0.5 * (lo + hi)
+    reach = 0.5 * float(np.linalg.norm(hi - lo))
+    s = np.linspace(-reach, reach, count)
+    u, v = (a.ravel() for a in np.meshgrid(s, s, indexing="ij"))
+    origins = centre + 2.0 * reach * n + u[:, None] * e1 + v[:, None] * e2
+    return origins, np.tile(-n, (len(origins), 1))
 
 
 def first_guess(scene, grid: Grid, plane: tuple[np.ndarray, np.ndarray]) -> Guess:
@@ -513,11 +533,14 @@ class ImplicitStart:
             shape = "revolution"
             self._revolution_field(revolution, out)
         else:
-            if guess.kind == "plane" and self.quadric.sheets_crossed(
-                    *self.scene.rays(), lo, hi) > 1:
-                # seen from one side, a surface is crossed once by each ray; a general quadric
-                # that a ray crosses twice in the domain closes a second sheet there, so the
-                # prior is a quadratic height field over the plane instead (one sheet)
+            if guess.kind == "plane" and max(
+                    self.quadric.sheets_crossed(*self.scene.rays(), lo, hi),
+                    self.quadric.sheets_crossed(*columns(guess.normal, lo, hi), lo, hi)) > 1:
+                # seen from one side, a surface is crossed once by each ray, and once by each
+                # line along the plane's normal; a general quadric crossed twice in the domain
+                # has a second sheet there, which the fit would follow (a fold, or a sheet
+                # that no ray sees), so the prior is a quadratic height field over the plane
+                # instead (one sheet)
                 self.quadric, _, _ = Q.fit_quadric(
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))

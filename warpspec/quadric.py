@@ -124,7 +124,10 @@ class Quadric:
         with np.errstate(all="ignore"):
             disc = qb * qb - 4.0 * qa * qc
             sq = np.sqrt(np.maximum(disc, 0.0))
-            roots = np.stack([(-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa)])
+            # the stable pair of roots; one of them is -qc / qb where q is linear along the ray
+            big = -0.5 * (qb + np.where(qb < 0.0, -sq, sq))
+            roots = np.stack([big / qa, qc / big])
+            roots[0] = np.where(np.abs(qa) > 1e-12 * np.abs(big), roots[0], np.nan)
             inside = (disc >= 0) & np.isfinite(roots) & (roots >= t0) & (roots <= t1) \
                 & (t0 <= t1)
         return int(inside.sum(axis=0).max()) if len(o) else 0
