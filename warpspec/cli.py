@@ -689,9 +689,10 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--resume", default=None, help="continue from a level set saved with "
                                                     "--save-phi (its grid is used)")
     rec.add_argument("--crop", default="auto", choices=["auto", "none", "hull", "support"],
-                     help="auto (default): crop an open surface that wraps past 180 "
-                          "degrees to where the data reaches (the hull of the rays' hits and "
-                          "the points), keep others whole; none: the whole "
+                     help="auto (default): crop an open surface that bends round (its "
+                          "normals turn past 120 degrees) to where the data reaches (the "
+                          "hull of the rays' hits and the points), keep others whole; none: "
+                          "the whole "
                           "zero set; hull: the faces inside the hull of the constraints; "
                           "support: the faces "
                           "within 3 voxels of a constraint (a ray's hit or a point)")

@@ -438,17 +438,26 @@ def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool) -> Synthet
     )
 
 
-def wrap(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+def wrap(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
+         span: float | None = None) -> SyntheticScene:
     """A cylinder patch wrapping 200-240 degrees around its axis, seen from its convex side.
 
     Radius about 0.5, axial length about 0.8, axis near ``z`` (by seed); 36 highlights spread
-    over the patch (inset from its edges), each seen by its own flash camera 2 from the point
-    along the normal: a ring of cameras around the axis. Five points; domain: the patch's box
-    grown by 12% of its size. An open patch (Euler number 1).
+    over the patch (inset from its edges by 5% of its span), each seen by its own flash camera
+    2 from the point along the normal: a ring of cameras around the axis. Five points;
+    domain: the patch's box grown by 12% of its size. An open patch (Euler number 1).
+    ``span`` (degrees, 90 to 330) replaces the seeded span.
+
+    Raises:
+        SceneError: If ``span`` is not a number from 90 to 330.
     """
     rng = _shape_rng(seed, "wrap")
     radius = 0.5 * float(rng.uniform(0.93, 1.07))
-    span = math.radians(float(rng.uniform(200.0, 240.0)))
+    seeded = float(rng.uniform(200.0, 240.0))
+    if span is not None and (isinstance(span, bool) or not isinstance(span, int | float)
+                             or not 90.0 <= span <= 330.0):
+        raise SceneError(f"span: must be a number of degrees from 90 to 330, got {span!r}")
+    span = math.radians(seeded if span is None else float(span))
     start = float(rng.uniform(0, 2 * math.pi))
     half = 0.4 * float(rng.uniform(0.9, 1.1))
     axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.08 * rng.standard_normal(3))
@@ -582,7 +591,8 @@ def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: in
         seed: Seed of the noise and outliers; for the scenes of every shape class
             (``sphere-around`` to ``point-light``) also of the geometry (sizes, bumps, camera
             jitter, which points are chosen). The paper's scenes keep a fixed geometry.
-        **options: Options only some scenes take (``freeform``: ``highlights``).
+        **options: Options only some scenes take (``freeform``: ``highlights``; ``wrap``:
+            ``span``).
 
     Raises:
         SceneError: If the name is unknown, a scene does not take an option, or the settings
