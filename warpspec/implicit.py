@@ -75,6 +75,9 @@ ROBUST_TOP."""
 ROBUST_TOP = 32
 TORUS_ROUNDS = 6
 """Fit-and-intersect rounds of the torus when some rays are not flash-lit (normal lines)."""
+LIT_REFITS = 3
+"""Most fits of a surface of revolution under lamps, each from the axis of the normal lines
+through the rays' hits on the one before (while each meets more normals)."""
 FINE_ABOVE = 32
 """Levels finer than this many cells get the requested grid's budget (ROUNDS_FINE rounds of at
 most CG_ITERATIONS_FINE): they start from the level below and only correct its detail."""
@@ -702,7 +705,29 @@ class ImplicitStart:
             return None
         shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo, hi=hi,
                                      voxel=voxel, axis=(c, a))
-        return None if shape is None else self._accept(shape)
+        if shape is None:
+            return None
+        # False highlights pull the quadric, and with it the first axis, several degrees off;
+        # the normal lines through the rays' hits on the shape fitted last give a better one,
+        # as long as each new shape meets more normals than the one before
+        met = 0.0
+        for _ in range(LIT_REFITS):
+            hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
+            if (accepted := self._accept(shape, hits, inside)) is not None:
+                return accepted
+            share = float(np.mean(self._residuals(shape, hits, inside)[inside] <= QUADRIC_DEG))
+            if share <= met or int(inside.sum()) < R.MIN_RAYS:
+                return None
+            met = share
+            normals = self.scene.normals(hits)
+            c, a = best_axis(hits[inside], normals[inside])
+            if c is None:
+                return None
+            shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo,
+                                         hi=hi, voxel=voxel, axis=(c, a))
+            if shape is None:
+                return None
+        return self._accept(shape)
 
     def _torus_field(self, t: T.Torus, out: wp.array) -> None:
         """The ring torus' exact distance on the grid."""
@@ -771,14 +796,18 @@ class ImplicitStart:
                                            step=self.grid.spacing)
         if not inside.any():
             return None
-        cos = np.clip(np.einsum("ij,ij->i", shape.gradient(hits), self.scene.normals(hits)),
-                      -1.0, 1.0)
-        residual = np.where(inside, np.degrees(np.arccos(cos)), 180.0)
+        residual = self._residuals(shape, hits, inside)
         if not self._shape_suffices(residual[inside], np.abs(shape.value(points))):
             return None
         self.residual = residual
         self.weights = (inside & (residual <= REJECT_DEG)).astype(float)
         return shape
+
+    def _residuals(self, shape, hits: np.ndarray, inside: np.ndarray) -> np.ndarray:
+        """The angle (degrees) between ``shape``'s normal and each ray's at its hit (180 off it)."""
+        cos = np.clip(np.einsum("ij,ij->i", shape.gradient(hits), self.scene.normals(hits)),
+                      -1.0, 1.0)
+        return np.where(inside, np.degrees(np.arccos(cos)), 180.0)
 
     def _quadric_field(self, grid: Grid, out: wp.array, *, unit: float = 1.0) -> None:
         """The quadric's first-order distance on ``grid``, in units of ``unit``."""
