@@ -75,7 +75,7 @@ ROBUST_TOP."""
 ROBUST_TOP = 32
 TORUS_ROUNDS = 6
 """Fit-and-intersect rounds of the torus when some rays are not flash-lit (normal lines)."""
-LIT_REFITS = 3
+LIT_REFITS = 2
 """Most fits of a surface of revolution under lamps, each from the axis of the normal lines
 through the rays' hits on the one before (while each meets more normals)."""
 FINE_ABOVE = 32
