@@ -106,7 +106,7 @@ def test_the_bottle_starts_from_a_surface_of_revolution(name, seed, outliers, bo
     assert err.mean() < bound * result.grid.spacing
 
 
-@pytest.mark.parametrize("seed", [0, 2])
+@pytest.mark.parametrize("seed", [0, 1, 4])
 def test_under_lamps_false_highlights_cost_refits_not_the_shape(seed):
     """A quarter of false highlights leaves the first axis 8-15 degrees off; the refits from
     the normal lines through the hits on the shape fitted last find it (resolution 64)."""
