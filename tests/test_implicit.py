@@ -492,3 +492,22 @@ def test_the_wrap_scene_takes_a_span():
         make_scene("wrap", span=20.0)
     normals = make_scene("wrap", span=150.0).truth_normals
     assert np.degrees(np.arccos(np.clip(normals @ normals.T, -1, 1))).max() < 150.0
+
+
+def test_cameras_in_a_ring_circle_their_mean_direction_and_lean_from_it():
+    from warpspec.implicit import in_a_ring
+
+    def ring(elevation_deg, count=12):
+        a = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+        e = np.radians(elevation_deg)
+        return np.column_stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a),
+                                np.full(count, np.sin(e))])
+
+    assert in_a_ring(ring(20.0))  # mean length sin 20 = 0.34
+    assert not in_a_ring(ring(40.0))  # 0.64: over the data more than around it
+    rng = np.random.default_rng(0)
+    cap = rng.normal(size=(30, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
+    assert not in_a_ring(cap / np.linalg.norm(cap, axis=1, keepdims=True))
+    half = ring(10.0)[:6]  # half a ring: a half-plane holds it
+    assert not in_a_ring(half)
+    assert not in_a_ring(ring(10.0)[:2])

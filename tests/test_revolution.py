@@ -141,3 +141,19 @@ def test_under_lamps_the_axis_is_the_one_that_makes_one_smooth_profile(seed):
     assert np.degrees(np.arccos(min(1.0, abs(float(surface.axis @ truth.axis))))) < 0.05
     assert np.abs(surface.value(synthetic.truth_points)).mean() < 0.3 * voxel
     assert np.abs(surface.value(scene.points)).max() < 0.1 * voxel
+
+
+def test_cameras_in_one_ring_above_see_a_tube_not_a_patch():
+    """Walked round at one height above the bottle, the cameras lie in a half-space (the plane
+    guess), yet they circle it: the surface of revolution is still tried, and taken."""
+    with pytest.raises(ws.SceneError, match="rings"):
+        make_scene("bottle", rings=3)
+    synthetic = make_scene("bottle", rings=1)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=32, device="cpu")
+    assert solver.fit_report.guess == "plane"
+    assert solver.fit_report.shape == "revolution"
+    solver.run(20)
+    result = solver.result()
+    assert result.mesh.euler_number == 0
+    err = np.abs(synthetic.surface.implicit(result.vertices))
+    assert err.mean() < 0.5 * result.grid.spacing

@@ -377,29 +377,42 @@ def _torus(*, noise: float, outliers: float, seed: int, lamps: bool) -> Syntheti
     )
 
 
-def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
-    """A bottle (body, shoulder, neck; a surface of revolution) seen by two rings of flashes.
+BOTTLE_RINGS = {1: ((0.7, 0.3, 20),), 2: ((0.0, 0.0, 14), (1.05, 0.45, 14))}
+"""The bottle's camera rings by count: (height, height aimed at, cameras) along its axis."""
+
+
+def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
+           rings: int = 2) -> SyntheticScene:
+    """A bottle (body, shoulder, neck; a surface of revolution) seen by rings of flashes.
 
     Body radius about 0.35, neck about 0.13, shoulder about 0.35 above the base point, axis
-    near ``z`` (all varied by seed). 14 cameras on a ring at the body's height and 14 above the
-    shoulder, 1.6 from the axis; each keeps up to 2 highlights. Six points. The domain holds
-    the bottle's width with a 12% margin and cuts its body below (height -0.45) and its neck
-    above (height 0.85), so the truth is an open tube (Euler number 0).
+    near ``z`` (all varied by seed). ``rings=2``: 14 cameras on a ring at the body's height and
+    14 above the shoulder; ``rings=1``: 20 on one ring at height 0.7, looking down at 0.3
+    (a half-space holds them all). 1.6 from the axis; each keeps up to 2 highlights. Six
+    points. The domain holds the bottle's width with a 12% margin and cuts its body below
+    (height -0.45) and its neck above (height 0.85), so the truth is an open tube (Euler
+    number 0).
+
+    Raises:
+        SceneError: If ``rings`` is not 1 or 2.
     """
-    return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=False)
+    return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=False, rings=rings)
 
 
-def bottle_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
-                 ) -> SyntheticScene:
+def bottle_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
+                 rings: int = 2) -> SyntheticScene:
     """The ``bottle`` scene's shape and cameras, each camera with its own directional lamp.
 
     Each lamp is 25-40 degrees off its camera's viewing direction (as in
     ``ellipsoid-around``), so a ray is no longer a normal line of the surface.
     """
-    return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=True)
+    return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=True, rings=rings)
 
 
-def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool) -> SyntheticScene:
+def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool,
+            rings: int) -> SyntheticScene:
+    if isinstance(rings, bool) or rings not in BOTTLE_RINGS:
+        raise SceneError(f"rings: expected 1 or 2, got {rings!r}")
     rng = _shape_rng(seed, "bottle")
     axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.05 * rng.standard_normal(3))
     base = rng.uniform(-0.05, 0.05, 3)
@@ -419,8 +432,8 @@ def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool) -> Synthet
     lo = np.append(verts.min(axis=0)[:2] - pad, lo_z)
     hi = np.append(verts.max(axis=0)[:2] + pad, hi_z)
     centres, targets = [], []
-    for height, aim in ((0.0, 0.0), (1.05, 0.45)):
-        az = np.linspace(0, 2 * math.pi, 14, endpoint=False) + rng.uniform(0, 2 * math.pi)
+    for height, aim, count in BOTTLE_RINGS[rings]:
+        az = np.linspace(0, 2 * math.pi, count, endpoint=False) + rng.uniform(0, 2 * math.pi)
         az = az + rng.uniform(-0.1, 0.1, len(az))
         ring = 1.6 * (np.cos(az)[:, None] * surf.e1 + np.sin(az)[:, None] * surf.e2)
         centres.append(base + ring + (height + rng.uniform(-0.05, 0.05, (len(az), 1))) * axis)
@@ -592,7 +605,7 @@ def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: in
             (``sphere-around`` to ``point-light``) also of the geometry (sizes, bumps, camera
             jitter, which points are chosen). The paper's scenes keep a fixed geometry.
         **options: Options only some scenes take (``freeform``: ``highlights``; ``wrap``:
-            ``span``).
+            ``span``; ``bottle`` and ``bottle-lamps``: ``rings``).
 
     Raises:
         SceneError: If the name is unknown, a scene does not take an option, or the settings
