@@ -494,20 +494,20 @@ def test_the_wrap_scene_takes_a_span():
     assert np.degrees(np.arccos(np.clip(normals @ normals.T, -1, 1))).max() < 150.0
 
 
-def test_cameras_in_a_ring_circle_their_mean_direction_and_lean_from_it():
-    from warpspec.implicit import in_a_ring
-
-    def ring(elevation_deg, count=12):
-        a = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
-        e = np.radians(elevation_deg)
-        return np.column_stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a),
-                                np.full(count, np.sin(e))])
-
-    assert in_a_ring(ring(20.0))  # mean length sin 20 = 0.34
-    assert not in_a_ring(ring(40.0))  # 0.64: over the data more than around it
-    rng = np.random.default_rng(0)
-    cap = rng.normal(size=(30, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
-    assert not in_a_ring(cap / np.linalg.norm(cap, axis=1, keepdims=True))
-    half = ring(10.0)[:6]  # half a ring: a half-plane holds it
-    assert not in_a_ring(half)
-    assert not in_a_ring(ring(10.0)[:2])
+def test_a_torus_seen_only_from_above_is_still_a_torus():
+    """Cameras 15-75 degrees above the torus' plane only: a half-space holds them (the plane
+    guess), yet they see it from every side, and the ring torus is tried and taken."""
+    synthetic = make_scene("torus")
+    scene, t = synthetic.scene(), synthetic.surface
+    rel = scene.camera_centres() - t.centre
+    elevation = np.degrees(np.arcsin(rel @ t.axis / np.linalg.norm(rel, axis=1)))
+    keep = (elevation > 15.0) & (elevation < 75.0)
+    data = scene.to_dict()
+    data["specularities"] = [s for s in data["specularities"] if keep[s["camera"]]]
+    solver = ws.Reconstructor(ws.Scene.from_dict(data), resolution=32, device="cpu")
+    assert solver.fit_report.guess == "plane"
+    assert solver.fit_report.shape == "torus"
+    solver.run(20)
+    result = solver.result()
+    assert result.mesh.is_watertight and result.mesh.euler_number == 0
+    assert np.abs(t.implicit(result.vertices)).mean() < 0.3 * result.grid.spacing

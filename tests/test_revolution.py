@@ -145,7 +145,7 @@ def test_under_lamps_the_axis_is_the_one_that_makes_one_smooth_profile(seed):
 
 def test_cameras_in_one_ring_above_see_a_tube_not_a_patch():
     """Walked round at one height above the bottle, the cameras lie in a half-space (the plane
-    guess), yet they circle it: the surface of revolution is still tried, and taken."""
+    guess), yet they see it from every side: the surface of revolution is tried, and taken."""
     with pytest.raises(ws.SceneError, match="rings"):
         make_scene("bottle", rings=3)
     synthetic = make_scene("bottle", rings=1)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import warp as wp
@@ -116,8 +116,9 @@ SAMPLE_WEIGHTS = (0.5, 1.0, 0.5)
 COLUMNS = 33
 """Lines per side of the sweep that checks a one-sided prior for a second sheet."""
 RING_LENGTH = 0.5
-"""Cameras held by a half-space stand in a ring around the data when their mean direction
-(from the rays' convergence) is shorter than this and they circle it (:func:`in_a_ring`)."""
+"""Under lamps, cameras that a half-space holds are tried for a surface of revolution only
+when their mean direction (:attr:`Guess.lean`) is shorter than this: 0.17-0.62 for rings
+round a bottle or a torus, 0.55-0.97 for the cameras over this package's patches."""
 
 
 def level_ladder(resolution: int) -> list[int]:
@@ -181,9 +182,10 @@ class Guess:
     normal: np.ndarray | None = None
     convergence: np.ndarray | None = None
     """The point nearest to the rays (or the points' mean), whichever the kind."""
-    around: bool = False
-    """Whether the cameras stand around the data: all around (a sphere), or in a ring above
-    or below it (a plane, yet a tube or a ring may be what they see)."""
+    lean: float = 0.0
+    """The length of the mean of the directions from the convergence to the cameras, when a
+    half-space holds them: near 1 when they crowd over the data, small when they stand in
+    rings round it."""
 
 
 def columns(normal: np.ndarray, lo: np.ndarray, hi: np.ndarray, *, count: int = COLUMNS
@@ -223,28 +225,8 @@ def first_guess(scene, grid: Grid, plane: tuple[np.ndarray, np.ndarray]) -> Gues
     u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
     if not surrounds(u):
         return Guess("plane", np.asarray(plane[0], float), normal=np.asarray(plane[1], float),
-                     convergence=c, around=in_a_ring(u))
+                     convergence=c, lean=float(np.linalg.norm(u.mean(axis=0))))
     return sphere_guess(scene, grid, c)
-
-
-def in_a_ring(directions: np.ndarray) -> bool:
-    """Whether unit ``directions`` ``(K, 3)`` circle their mean one, leaning far from it.
-
-    Cameras walked round an object at one height above (or below) it: a half-space holds them,
-    yet they see it from every side. Their mean direction is shorter than
-    :data:`RING_LENGTH`, and across it they leave no half-plane empty. Cameras over a patch
-    seen from above crowd about their mean direction (0.55-0.97 long in this package's
-    scenes; 0.17-0.45 for a bottle seen from one ring above it).
-    """
-    u = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    if len(u) < 3:
-        return False
-    mean = u.mean(axis=0)
-    length = float(np.linalg.norm(mean))
-    if length >= RING_LENGTH or length == 0.0:
-        return False
-    across = u - np.outer(u @ mean, mean) / length**2
-    return surrounds(across / np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300))
 
 
 def sphere_guess(scene, grid: Grid, c: np.ndarray) -> Guess:
@@ -537,10 +519,11 @@ class ImplicitStart:
             if np.mean(other[2] <= QUADRIC_DEG) > np.mean(self.residual <= QUADRIC_DEG):
                 quad, self.weights, self.residual = other
         self.quadric = quad
-        # the closed shapes (a torus, a surface of revolution) are tried when the cameras
-        # stand around the data, as a sphere about the rays' convergence
-        around = guess if guess.kind == "sphere" else (
-            sphere_guess(self.scene, self.grid, guess.convergence) if guess.around else None)
+        # the closed shapes (a torus, a surface of revolution) are tried from a sphere about
+        # the rays' convergence: seen from one side too, since cameras walked round an object
+        # at one height above it lie in a half-space yet see every side of it
+        around = guess if guess.kind == "sphere" else replace(
+            sphere_guess(self.scene, self.grid, guess.convergence), lean=guess.lean)
         rounds, cg = [], []
         ladder: list[int] = []
         pockets = 0
@@ -557,11 +540,11 @@ class ImplicitStart:
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
             shape = "quadric"
-        elif around is not None and (torus := self._torus(around)) is not None:
+        elif (torus := self._torus(around)) is not None:
             self.torus = torus
             shape = "torus"
             self._torus_field(torus, out)
-        elif around is not None and (revolution := self._revolution(around)) is not None:
+        elif (revolution := self._revolution(around)) is not None:
             self.revolution = revolution
             shape = "revolution"
             self._revolution_field(revolution, out)
@@ -724,6 +707,10 @@ class ImplicitStart:
             return self._from_normal_lines(
                 guess, fit, "a surface of revolution fitted to the highlights' normal lines")
         if guess.kind != "sphere" or len(origins) < R.MIN_RAYS or not self.scene.num_points:
+            return None
+        if guess.lean >= RING_LENGTH:
+            # cameras over the data more than around it: a patch, far likelier than a tube
+            # (the fit takes seconds, and it would rarely be taken)
             return None
         self._say("a surface of revolution fitted to the highlights")
         hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
