@@ -115,10 +115,11 @@ SAMPLE_OFFSETS = (-0.5, 0.0, 0.5)
 SAMPLE_WEIGHTS = (0.5, 1.0, 0.5)
 COLUMNS = 33
 """Lines per side of the sweep that checks a one-sided prior for a second sheet."""
-RING_LENGTH = 0.5
+RING_LENGTH = 0.4
 """Under lamps, cameras that a half-space holds are tried for a surface of revolution only
-when their mean direction (:attr:`Guess.lean`) is shorter than this: 0.17-0.62 for rings
-round a bottle or a torus, 0.55-0.97 for the cameras over this package's patches."""
+when their mean direction (:attr:`Guess.lean`) is shorter than this: 0.17-0.31 for a ring
+30 degrees or less above a bottle, 0.48-0.97 for the cameras over this package's patches
+(the point-lit dome's 0.48 cost it 6 s at 0.5)."""
 
 
 def level_ladder(resolution: int) -> list[int]:
