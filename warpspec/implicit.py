@@ -510,21 +510,20 @@ class ImplicitStart:
         self._say(f"a quadric fitted to {self.m} rays and {self.scene.num_points} points")
         quad, self.weights, self.residual = Q.fit_quadric(
             self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing)
+        # a sphere about the rays' convergence: the closed shapes (a torus, a surface of
+        # revolution) are tried from it, seen from one side too, since cameras walked round
+        # an object at one height above it lie in a half-space yet see every side of it
+        ball = guess if guess.kind == "sphere" else replace(
+            sphere_guess(self.scene, self.grid, guess.convergence), lean=guess.lean)
         if guess.kind == "plane":
             # a patch seen from one side may still be curved like a sphere seen from outside:
-            # the fit from a sphere through the points is kept when it meets more normals
-            ball = sphere_guess(self.scene, self.grid, guess.convergence)
+            # the fit from that sphere is kept when it meets more normals
             other = Q.fit_quadric(self.scene, Q.sphere(ball.centre, ball.radius,
                                                        frame_centre=frame, scale=scale),
                                   lo=lo, hi=hi, voxel=self.grid.spacing)
             if np.mean(other[2] <= QUADRIC_DEG) > np.mean(self.residual <= QUADRIC_DEG):
                 quad, self.weights, self.residual = other
         self.quadric = quad
-        # the closed shapes (a torus, a surface of revolution) are tried from a sphere about
-        # the rays' convergence: seen from one side too, since cameras walked round an object
-        # at one height above it lie in a half-space yet see every side of it
-        around = guess if guess.kind == "sphere" else replace(
-            sphere_guess(self.scene, self.grid, guess.convergence), lean=guess.lean)
         rounds, cg = [], []
         ladder: list[int] = []
         pockets = 0
@@ -541,11 +540,11 @@ class ImplicitStart:
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
             shape = "quadric"
-        elif (torus := self._torus(around)) is not None:
+        elif (torus := self._torus(ball)) is not None:
             self.torus = torus
             shape = "torus"
             self._torus_field(torus, out)
-        elif (revolution := self._revolution(around)) is not None:
+        elif (revolution := self._revolution(ball)) is not None:
             self.revolution = revolution
             shape = "revolution"
             self._revolution_field(revolution, out)
@@ -714,29 +713,14 @@ class ImplicitStart:
             # (the fit takes seconds, and it would rarely be taken)
             return None
         self._say("a surface of revolution fitted to the highlights")
+        # the first axis from the normal lines through the rays' hits on the quadric; false
+        # highlights pull the quadric, and with it that axis, several degrees off, so the
+        # hits on each shape not taken give the next one, while each meets more normals
         hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
-        normals = self.scene.normals(hits)
-        if int(inside.sum()) < R.MIN_RAYS:
-            return None
-        c, a = best_axis(hits[inside], normals[inside])
-        if c is None:
-            return None
-        shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo, hi=hi,
-                                     voxel=voxel, axis=(c, a))
-        if shape is None:
-            return None
-        # False highlights pull the quadric, and with it the first axis, several degrees off;
-        # the normal lines through the rays' hits on the shape fitted last give a better one,
-        # as long as each new shape meets more normals than the one before
         met = 0.0
-        for _ in range(LIT_REFITS):
-            hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
-            if (accepted := self._accept(shape, hits, inside)) is not None:
-                return accepted
-            share = float(np.mean(self._residuals(shape, hits, inside)[inside] <= QUADRIC_DEG))
-            if share <= met or int(inside.sum()) < R.MIN_RAYS:
+        for _ in range(1 + LIT_REFITS):
+            if int(inside.sum()) < R.MIN_RAYS:
                 return None
-            met = share
             normals = self.scene.normals(hits)
             c, a = best_axis(hits[inside], normals[inside])
             if c is None:
@@ -745,7 +729,14 @@ class ImplicitStart:
                                          hi=hi, voxel=voxel, axis=(c, a))
             if shape is None:
                 return None
-        return self._accept(shape)
+            hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
+            if (accepted := self._accept(shape, hits, inside)) is not None:
+                return accepted
+            share = float(np.mean(self._residuals(shape, hits, inside)[inside] <= QUADRIC_DEG))
+            if share <= met:
+                return None
+            met = share
+        return None
 
     def _torus_field(self, t: T.Torus, out: wp.array) -> None:
         """The ring torus' exact distance on the grid."""

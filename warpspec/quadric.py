@@ -85,13 +85,7 @@ class Quadric:
         t = np.full(len(o), np.nan)
         crossing = np.zeros(len(o), dtype=bool)
         with np.errstate(all="ignore"):
-            disc = qb * qb - 4.0 * qa * qc
-            sq = np.sqrt(np.maximum(disc, 0.0))
-            linear = np.abs(qa) < 1e-12 * (np.abs(qb) + np.abs(qc) + 1e-300)
-            r_lin = -qc / qb
-            r1 = np.where(linear, r_lin, (-qb - sq) / (2.0 * qa))
-            r2 = np.where(linear, r_lin, (-qb + sq) / (2.0 * qa))
-            lo_r, hi_r = np.minimum(r1, r2), np.maximum(r1, r2)
+            disc, lo_r, hi_r = _roots(qa, qb, qc)
             for r in (lo_r, hi_r):
                 # an entry: q goes from + to - as t grows (derivative negative)
                 deriv = 2.0 * qa * r + qb
@@ -122,15 +116,26 @@ class Quadric:
         qb = 2.0 * np.einsum("ij,jk,ik->i", dirs, A, o) + dirs @ b
         qc = np.einsum("ij,jk,ik->i", o, A, o) + o @ b + c
         with np.errstate(all="ignore"):
-            disc = qb * qb - 4.0 * qa * qc
-            sq = np.sqrt(np.maximum(disc, 0.0))
-            # the stable pair of roots; one of them is -qc / qb where q is linear along the ray
-            big = -0.5 * (qb + np.where(qb < 0.0, -sq, sq))
-            roots = np.stack([big / qa, qc / big])
-            roots[0] = np.where(np.abs(qa) > 1e-12 * np.abs(big), roots[0], np.nan)
+            disc, lo_r, hi_r = _roots(qa, qb, qc)
+            roots = np.stack([lo_r, hi_r])
             inside = (disc >= 0) & np.isfinite(roots) & (roots >= t0) & (roots <= t1) \
                 & (t0 <= t1)
         return int(inside.sum(axis=0).max()) if len(o) else 0
+
+
+def _roots(qa: np.ndarray, qb: np.ndarray, qc: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The discriminant and the roots (smaller, larger) of ``qa t^2 + qb t + qc`` per ray.
+
+    Where ``q`` is linear along the ray its one root is the smaller, and the larger is NaN.
+    Call under ``np.errstate(all="ignore")``.
+    """
+    disc = qb * qb - 4.0 * qa * qc
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    linear = np.abs(qa) < 1e-12 * (np.abs(qb) + np.abs(qc) + 1e-300)
+    r1 = np.where(linear, -qc / qb, (-qb - sq) / (2.0 * qa))
+    r2 = np.where(linear, np.nan, (-qb + sq) / (2.0 * qa))
+    return disc, np.fmin(r1, r2), np.where(linear, np.nan, np.fmax(r1, r2))
 
 
 def _slab(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray):

@@ -393,7 +393,10 @@ class Reconstructor:
             return False
         origins, dirs = self.scene.rays()
         normals = self.scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
-        if np.min(normals @ normals.T) >= np.cos(np.radians(TURN_DEG)):
+        cos_turn = np.cos(np.radians(TURN_DEG))
+        step = max(1, PAIR_CHUNK // len(normals))  # bounded memory: normals x normals
+        if all(np.min(normals[k:k + step] @ normals.T) >= cos_turn
+               for k in range(0, len(normals), step)):
             return False  # a gentle patch
         # Around what axis, and how far: the normals' largest empty arc in their principal
         # plane. Seen all around (a bottle), the data leaves no such gap and the surface is
@@ -456,6 +459,8 @@ fit's extrapolation past the data bends on round, behind it: a cylinder patch of
 whose highlights' normals span 166 kept the back of the cylinder, 3 voxels from the truth on
 average and 25 at worst. The paper's scenes and the free-form and point-lit patches span
 15-85 degrees; their rims stay."""
+PAIR_CHUNK = 1 << 22
+"""Normal pairs compared at once by :meth:`Reconstructor._wraps_around` (32 MiB of float64)."""
 WRAP_GAP_DEG = 90.0
 """An open surface whose normals turn by more than TURN_DEG is cropped only when they also
 leave an arc this wide empty around it (a patch wrapping past 180 degrees, not a tube seen all

@@ -412,7 +412,7 @@ def bottle_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
 def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool,
             rings: int) -> SyntheticScene:
     if isinstance(rings, bool) or rings not in BOTTLE_RINGS:
-        raise SceneError(f"rings: expected 1 or 2, got {rings!r}")
+        raise SceneError(f"rings: expected one of {sorted(BOTTLE_RINGS)}, got {rings!r}")
     rng = _shape_rng(seed, "bottle")
     axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.05 * rng.standard_normal(3))
     base = rng.uniform(-0.05, 0.05, 3)
