@@ -106,10 +106,12 @@ def test_the_bottle_starts_from_a_surface_of_revolution(name, seed, outliers, bo
     assert err.mean() < bound * result.grid.spacing
 
 
-@pytest.mark.parametrize("seed", [0, 1, 4])
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
 def test_under_lamps_false_highlights_cost_refits_not_the_shape(seed):
     """A quarter of false highlights leaves the first axis 8-15 degrees off; the refits from
-    the normal lines through the hits on the shape fitted last find it (resolution 64)."""
+    the normal lines through the hits on the shape fitted last, each from the rays that shape
+    met, find it, and the shape taken is fitted again without the rays it rejects (resolution
+    64; seeds 2 and 3 were lost, seed 4 came out 1.1 degrees off, 0.5 voxel)."""
     synthetic = make_scene("bottle-lamps", seed=seed, outliers=0.25)
     solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
     assert solver.fit_report.shape == "revolution"
@@ -117,7 +119,7 @@ def test_under_lamps_false_highlights_cost_refits_not_the_shape(seed):
     solver.run(1)
     result = solver.result()
     err = np.abs(synthetic.surface.implicit(result.vertices))
-    assert err.mean() < 0.5 * result.grid.spacing
+    assert err.mean() < 0.25 * result.grid.spacing
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -157,3 +159,44 @@ def test_cameras_in_one_ring_above_see_a_tube_not_a_patch():
     assert result.mesh.euler_number == 0
     err = np.abs(synthetic.surface.implicit(result.vertices))
     assert err.mean() < 0.5 * result.grid.spacing
+
+
+def test_arc_length_weights_match_the_slope_to_second_order():
+    """Each third difference's row is weighed by ``(1 + r'^2)^(-7/4)`` at its middle: exactly
+    on a cone (constant slope), and to second order in the knot spacing on a curved profile."""
+    heights = np.linspace(-1.0, 1.0, 21)
+    for slope in (0.0, 0.5, 2.0):
+        w = R._arc_length_weights(heights, 0.3 + slope * heights)
+        np.testing.assert_allclose(w, (1.0 + slope**2) ** -1.75, rtol=1e-12)
+    errors = []
+    for count in (41, 81, 161):
+        h = np.linspace(-1.0, 1.0, count)
+        w = R._arc_length_weights(h, 0.4 + 0.15 * np.tanh(4.0 * h))
+        middle = 0.5 * (h[1:-2] + h[2:-1])
+        exact = (1.0 + (0.6 / np.cosh(4.0 * middle) ** 2) ** 2) ** -1.75
+        inner = slice(2, -2)  # np.gradient is first order at the ends
+        errors.append(np.abs(w - exact)[inner].max())
+    assert errors[0] / errors[1] > 3.5 and errors[1] / errors[2] > 3.5
+
+
+def test_a_steep_shoulder_costs_no_more_than_a_gentle_one():
+    """Measured along the profile, the third-order energy lets the fit be as steep as the
+    data: on the flash-lit bottles the profile between the shoulder's highlights and the neck
+    lies closer to the truth than with the energy measured along the axis."""
+    errors = {}
+    for weighted in (True, False):
+        total = 0.0
+        for seed in (3, 4, 5):
+            synthetic = make_scene("bottle", seed=seed)
+            if not weighted:
+                original = R._arc_length_weights
+                R._arc_length_weights = lambda heights, radii: None
+            try:
+                surface, _ = _fit(synthetic)
+            finally:
+                if not weighted:
+                    R._arc_length_weights = original
+            samples = synthetic.surface.sample(4000, seed=0, extent=(0.2, 0.8))
+            total += np.abs(surface.value(samples)).mean() / 0.02
+        errors[weighted] = total / 3
+    assert errors[True] < 0.95 * errors[False]  # 0.83 against 0.92 voxels

@@ -76,8 +76,10 @@ ROBUST_TOP = 32
 TORUS_ROUNDS = 6
 """Fit-and-intersect rounds of the torus when some rays are not flash-lit (normal lines)."""
 LIT_REFITS = 2
-"""Most fits of a surface of revolution under lamps, each from the axis of the normal lines
-through the rays' hits on the one before (while each meets more normals)."""
+"""Most fits of a surface of revolution under lamps after the first, each from the axis of the
+normal lines through the rays' hits on the one before and only the rays it met within
+REJECT_DEG (while each meets more normals); the one taken is fitted once more without the rays
+it rejects."""
 FINE_ABOVE = 32
 """Levels finer than this many cells get the requested grid's budget (ROUNDS_FINE rounds of at
 most CG_ITERATIONS_FINE): they start from the level below and only correct its detail."""
@@ -717,26 +719,45 @@ class ImplicitStart:
         # highlights pull the quadric, and with it that axis, several degrees off, so the
         # hits on each shape not taken give the next one, while each meets more normals
         hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
+        use = inside
         met = 0.0
         for _ in range(1 + LIT_REFITS):
-            if int(inside.sum()) < R.MIN_RAYS:
+            if int(use.sum()) < R.MIN_RAYS:
                 return None
             normals = self.scene.normals(hits)
-            c, a = best_axis(hits[inside], normals[inside])
+            c, a = best_axis(hits[use], normals[use])
             if c is None:
                 return None
-            shape = R.fit_revolution_lit(origins, dirs, normals, self.scene.points, lo=lo,
-                                         hi=hi, voxel=voxel, axis=(c, a))
+            shape = R.fit_revolution_lit(origins[use], dirs[use], normals[use],
+                                         self.scene.points, lo=lo, hi=hi, voxel=voxel,
+                                         axis=(c, a))
             if shape is None:
                 return None
             hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
             if (accepted := self._accept(shape, hits, inside)) is not None:
-                return accepted
-            share = float(np.mean(self._residuals(shape, hits, inside)[inside] <= QUADRIC_DEG))
+                break
+            residual = self._residuals(shape, hits, inside)
+            share = float(np.mean(residual[inside] <= QUADRIC_DEG))
             if share <= met:
                 return None
             met = share
-        return None
+            # the next fit takes only the rays this one meets within REJECT_DEG: a shape
+            # near the truth misses the false highlights by far, and their normal lines
+            # would pull the next axis off again
+            use = inside & (residual <= REJECT_DEG)
+        else:
+            return None
+        kept = inside & (self.residual <= REJECT_DEG)
+        if np.any(use & ~kept) and int(kept.sum()) >= R.MIN_RAYS:
+            # fitted with rays it rejects: fitted again without them, from its own axis
+            self._say("the surface of revolution fitted again without the rejected highlights")
+            shape = R.fit_revolution_lit(origins[kept], dirs[kept], normals[kept],
+                                         self.scene.points, lo=lo, hi=hi, voxel=voxel,
+                                         axis=(accepted.base, accepted.axis))
+            if shape is not None:
+                hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
+                accepted = self._accept(shape, hits, inside) or accepted
+        return accepted
 
     def _torus_field(self, t: T.Torus, out: wp.array) -> None:
         """The ring torus' exact distance on the grid."""
