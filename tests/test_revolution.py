@@ -200,3 +200,23 @@ def test_a_steep_shoulder_costs_no_more_than_a_gentle_one():
             total += np.abs(surface.value(samples)).mean() / 0.02
         errors[weighted] = total / 3
     assert errors[True] < 0.95 * errors[False]  # 0.83 against 0.92 voxels
+
+
+def test_two_points_at_one_height_ask_no_slope():
+    """Two points a thousandth apart along the axis whose radii differ by 0.03 voxel (as an
+    axis a tenth of a degree off leaves them) must not bend the body: the profile stays within
+    half a voxel of the truth over the body, and both points within a tenth of a voxel."""
+    synthetic = make_scene("bottle", seed=0)
+    truth = synthetic.surface
+    voxel = 0.02
+    pair = np.stack([truth.at(0.3, -0.3), truth.at(2.0, -0.301)])
+    radial = pair[1] - truth.base - (pair[1] - truth.base) @ truth.axis * truth.axis
+    pair[1] += 0.03 * voxel * radial / np.linalg.norm(radial)
+    scene = synthetic.scene()
+    origins, dirs = scene.rays()
+    lo, hi = scene.domain
+    surface, _ = fit_revolution(origins, dirs, np.concatenate([scene.points, pair]), lo=lo,
+                                hi=hi, voxel=voxel)
+    body = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(-0.42, 0.1, 27)[None, :])
+    assert np.abs(surface.value(body.reshape(-1, 3))).max() < 0.5 * voxel
+    assert np.abs(surface.value(pair)).max() < 0.1 * voxel
