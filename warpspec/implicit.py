@@ -750,7 +750,7 @@ class ImplicitStart:
         kept = inside & (self.residual <= REJECT_DEG)
         if np.any(use & ~kept) and int(kept.sum()) >= R.MIN_RAYS:
             # fitted with rays it rejects: fitted again without them, from its own axis
-            self._say("the surface of revolution fitted again without the rejected highlights")
+            self._say("a surface of revolution fitted again without the rejected highlights")
             shape = R.fit_revolution_lit(origins[kept], dirs[kept], normals[kept],
                                          self.scene.points, lo=lo, hi=hi, voxel=voxel,
                                          axis=(accepted.base, accepted.axis))
