@@ -199,7 +199,7 @@ def test_a_steep_shoulder_costs_no_more_than_a_gentle_one():
             samples = synthetic.surface.sample(4000, seed=0, extent=(0.2, 0.8))
             total += np.abs(surface.value(samples)).mean() / 0.02
         errors[weighted] = total / 3
-    assert errors[True] < 0.95 * errors[False]  # 0.83 against 0.92 voxels
+    assert errors[True] < 0.95 * errors[False]  # 0.77 against 0.85 voxels
 
 
 def test_two_points_at_one_height_ask_no_slope():
@@ -220,3 +220,23 @@ def test_two_points_at_one_height_ask_no_slope():
     body = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(-0.42, 0.1, 27)[None, :])
     assert np.abs(surface.value(body.reshape(-1, 3))).max() < 0.5 * voxel
     assert np.abs(surface.value(pair)).max() < 0.1 * voxel
+
+
+def test_beyond_its_data_the_profile_keeps_its_radius():
+    """Without the point on the neck the profile's last datum is the neck's highlights, where
+    the shoulder still slopes: the neck above keeps the radius found there (2.6-2.9 voxels
+    off at most, seeds 0-3) instead of thinning on along that slope (3.2-4.4)."""
+    heights = np.linspace(0.0, 1.0, 11)
+    flat = R._flat_ends(heights, np.linspace(1.0, 2.0, 11), np.array([0.3, 0.61]))
+    np.testing.assert_allclose(flat, [1.3] * 4 + [1.4, 1.5, 1.6, 1.7] + [1.7] * 3)
+    worst = []
+    for seed in range(4):
+        synthetic = make_scene("bottle", seed=seed)
+        scene, truth = synthetic.scene(), synthetic.surface
+        pts = scene.points[(scene.points - truth.base) @ truth.axis < 0.5]
+        origins, dirs = scene.rays()
+        lo, hi = scene.domain
+        surface, _ = fit_revolution(origins, dirs, pts, lo=lo, hi=hi, voxel=0.02)
+        neck = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(0.6, 0.84, 13)[None, :])
+        worst.append(np.abs(surface.value(neck.reshape(-1, 3))).max() / 0.02)
+    assert np.mean(worst) < 3.2
