@@ -511,3 +511,24 @@ def test_a_torus_seen_only_from_above_is_still_a_torus():
     result = solver.result()
     assert result.mesh.is_watertight and result.mesh.euler_number == 0
     assert np.abs(t.implicit(result.vertices)).mean() < 0.3 * result.grid.spacing
+
+
+def test_a_closed_form_shape_holds_four_points_in_five():
+    """The points' test of a closed-form start: four points in five within 1/64 of the
+    domain's size, so one noisy point of six passes and two do not, at any resolution."""
+    from types import SimpleNamespace
+
+    from warpspec.implicit import ImplicitStart
+
+    stub = SimpleNamespace(grid=SimpleNamespace(origin=np.zeros(3), upper=np.full(3, 0.64)))
+    residual = np.zeros(20)  # every normal met
+    near = np.full(6, 0.009)  # within 0.01 = 0.64 / 64
+    one_off, two_off = near.copy(), near.copy()
+    one_off[0] = 0.05
+    two_off[:2] = 0.05
+    assert ImplicitStart._shape_suffices(stub, residual, near)
+    assert ImplicitStart._shape_suffices(stub, residual, one_off)
+    assert not ImplicitStart._shape_suffices(stub, residual, two_off)
+    assert not ImplicitStart._shape_suffices(stub, residual, np.full(6, 0.011))
+    # the normals still decide first
+    assert not ImplicitStart._shape_suffices(stub, np.full(20, 5.0), near)

@@ -58,14 +58,16 @@ QUADRIC_AMBIGUOUS = 0.05
 """...no more than this share are off by between QUADRIC_DEG and REJECT_DEG (false highlights
 are further off; a shape that is not a quadric falls away gradually),..."""
 QUADRIC_POINT_SHARE = 0.8
-"""...and this share of the points lies within QUADRIC_POINT_SIZE of the domain's size of it
-(one voxel at resolution 64, whatever the grid: the shape taken does not change with it).
+"""...and at least this share of the points lies within QUADRIC_POINT_SIZE times the domain's
+size of it (one voxel at resolution 64, whatever the grid: the shape taken does not change
+with it).
 Points from structure from motion carry noise: when every point had to lie within a quarter
 voxel, a torus seen with six points off it by 0.3 voxel (rms) was refused, and the grid fit
 from the quadric came out 1.4-5.3 h off instead of 0.05-0.17. On every scene of the catalogue
 the shape that meets the normals holds its points within 0.07 voxel, and every shape refused
 is refused by its normals."""
 QUADRIC_POINT_SIZE = 1.0 / 64.0
+"""The points' tolerance, as a share of the domain's largest side."""
 REJECT_DEG = 10.0
 """A ray whose normal a robust pass misses by more than this, and by more than REJECT_SIGMAS
 robust standard deviations of the kept rays' misses, is rejected as false."""
@@ -83,10 +85,12 @@ ROBUST_TOP = 32
 TORUS_ROUNDS = 6
 """Fit-and-intersect rounds of the torus when some rays are not flash-lit (normal lines)."""
 LIT_REFITS = 2
-"""Most fits of a surface of revolution under lamps after the first, each from the axis of the
-normal lines through the rays' hits on the one before and only the rays it met within
-REJECT_DEG (while each meets more normals); the one taken is fitted once more without the rays
-it rejects."""
+"""Most fits of a surface of revolution under lamps after the first (which takes the rays that
+meet the quadric), each from the axis of the normal lines through the rays' hits on the one
+before and only the rays it met within REJECT_DEG (while each meets more normals). The one
+taken, when it was fitted with rays it rejects, is fitted once more without them, and that fit
+replaces it when it is the start by itself too (it is fitted to fewer rays, none of them one
+that the shape taken rejects)."""
 FINE_ABOVE = 32
 """Levels finer than this many cells get the requested grid's budget (ROUNDS_FINE rounds of at
 most CG_ITERATIONS_FINE): they start from the level below and only correct its detail."""
@@ -661,7 +665,7 @@ class ImplicitStart:
         """Whether the quadric is the shape (``inside``: the rays that enter the domain).
 
         It must meet most normals within noise, the rest must be clearly false (far off, not
-        a gradual falling away), and it must hold the points.
+        a gradual falling away), and it must hold the points (:meth:`_shape_suffices`).
         """
         pts = self.scene.points.reshape(-1, 3)
         g = np.linalg.norm(self.quadric.gradient(pts), axis=1)
@@ -675,8 +679,10 @@ class ImplicitStart:
             residual: Its normal misses (degrees) at the rays that meet the domain.
             point_distance: The points' distances from it (world units).
 
-        It must meet most normals within noise, the rest must be clearly false (far off, not
-        a gradual falling away), and it must hold the points.
+        It must meet most normals within noise (QUADRIC_SHARE within QUADRIC_DEG), the rest
+        must be clearly false (no more than QUADRIC_AMBIGUOUS between QUADRIC_DEG and
+        REJECT_DEG: far off, not a gradual falling away), and it must hold the points
+        (QUADRIC_POINT_SHARE of them within QUADRIC_POINT_SIZE of the domain's size).
         """
         if not len(residual):
             return False
@@ -685,8 +691,8 @@ class ImplicitStart:
             <= QUADRIC_AMBIGUOUS
         if len(point_distance):
             size = float(np.max(self.grid.upper - self.grid.origin))
-            within &= float(np.quantile(point_distance, QUADRIC_POINT_SHARE)) \
-                <= QUADRIC_POINT_SIZE * size
+            within &= float(np.mean(point_distance <= QUADRIC_POINT_SIZE * size)) \
+                >= QUADRIC_POINT_SHARE
         return bool(within)
 
     def _torus(self, guess: Guess) -> T.Torus | None:
@@ -706,7 +712,8 @@ class ImplicitStart:
         By flash the rays are its normal lines (:func:`warpspec.revolution.fit_revolution`);
         under other lights the axis is first guessed from the normal lines through the rays'
         hits on the quadric, then found from the rays themselves
-        (:func:`warpspec.revolution.fit_revolution_lit`).
+        (:func:`warpspec.revolution.fit_revolution_lit`), then refitted as :data:`LIT_REFITS`
+        says.
         """
         lo, hi, voxel = self.grid.origin, self.grid.upper, self.grid.spacing
         origins, dirs, codes, _ = self._rays
@@ -758,14 +765,18 @@ class ImplicitStart:
             return None
         kept = inside & (self.residual <= REJECT_DEG)
         if np.any(use & ~kept) and int(kept.sum()) >= R.MIN_RAYS:
-            # fitted with rays it rejects: fitted again without them, from its own axis
+            # fitted with rays it rejects: fitted again without them, from its own axis, with
+            # the normals asked at its own hits (a point light's depend on them)
             self._say("a surface of revolution fitted again without the rejected highlights")
+            normals = self.scene.normals(hits)
             shape = R.fit_revolution_lit(origins[kept], dirs[kept], normals[kept],
                                          self.scene.points, lo=lo, hi=hi, voxel=voxel,
                                          axis=(accepted.base, accepted.axis))
             if shape is not None:
                 hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
-                accepted = self._accept(shape, hits, inside) or accepted
+                refit = self._accept(shape, hits, inside)
+                if refit is not None:
+                    accepted = refit
         return accepted
 
     def _torus_field(self, t: T.Torus, out: wp.array) -> None:

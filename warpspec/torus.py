@@ -16,8 +16,8 @@ current hit, fitting and intersecting in turn. The fit (docs/DESIGN.md section 7
    the lines' distances from the core circle and the points' distances from the torus.
 
 The implicit start takes the torus when the quadric does not meet the normals and the torus
-does, as it would take a quadric (the same shares of rays within 3 and 10 degrees, every point
-within a quarter voxel).
+does, as it would take a quadric (the same shares of rays within 3 and 10 degrees, four points
+in five within 1/64 of the domain's size).
 """
 
 from __future__ import annotations
