@@ -734,6 +734,16 @@ class ImplicitStart:
         # the first axis from the normal lines through the rays' hits on the quadric; false
         # highlights pull the quadric, and with it that axis, several degrees off, so the
         # hits on each shape not taken give the next one, while each meets more normals
+        def fit(rays: np.ndarray, normals: np.ndarray, axis: tuple[np.ndarray, np.ndarray]):
+            # the rays' normals asked at their hits on the shape before (a point light's
+            # depend on them); the new shape and its own hits
+            shape = R.fit_revolution_lit(origins[rays], dirs[rays], normals[rays],
+                                         self.scene.points, lo=lo, hi=hi, voxel=voxel,
+                                         axis=axis)
+            if shape is None:
+                return None, None, None
+            return shape, *shape.intersect(origins, dirs, lo, hi, step=voxel)
+
         hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
         use = inside
         met = 0.0
@@ -744,12 +754,9 @@ class ImplicitStart:
             c, a = best_axis(hits[use], normals[use])
             if c is None:
                 return None
-            shape = R.fit_revolution_lit(origins[use], dirs[use], normals[use],
-                                         self.scene.points, lo=lo, hi=hi, voxel=voxel,
-                                         axis=(c, a))
+            shape, hits, inside = fit(use, normals, (c, a))
             if shape is None:
                 return None
-            hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
             if (accepted := self._accept(shape, hits, inside)) is not None:
                 break
             residual = self._residuals(shape, hits, inside)
@@ -765,18 +772,12 @@ class ImplicitStart:
             return None
         kept = inside & (self.residual <= REJECT_DEG)
         if np.any(use & ~kept) and int(kept.sum()) >= R.MIN_RAYS:
-            # fitted with rays it rejects: fitted again without them, from its own axis, with
-            # the normals asked at its own hits (a point light's depend on them)
+            # fitted with rays it rejects: fitted again without them, from its own axis
             self._say("a surface of revolution fitted again without the rejected highlights")
-            normals = self.scene.normals(hits)
-            shape = R.fit_revolution_lit(origins[kept], dirs[kept], normals[kept],
-                                         self.scene.points, lo=lo, hi=hi, voxel=voxel,
-                                         axis=(accepted.base, accepted.axis))
-            if shape is not None:
-                hits, inside = shape.intersect(origins, dirs, lo, hi, step=voxel)
-                refit = self._accept(shape, hits, inside)
-                if refit is not None:
-                    accepted = refit
+            shape, hits, inside = fit(kept, self.scene.normals(hits),
+                                      (accepted.base, accepted.axis))
+            if shape is not None and (refit := self._accept(shape, hits, inside)) is not None:
+                accepted = refit
         return accepted
 
     def _torus_field(self, t: T.Torus, out: wp.array) -> None:
