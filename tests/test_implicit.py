@@ -521,6 +521,7 @@ def test_a_closed_form_shape_holds_four_points_in_five():
     from warpspec.implicit import ImplicitStart
 
     stub = SimpleNamespace(grid=SimpleNamespace(origin=np.zeros(3), upper=np.full(3, 0.64)))
+    stub._holds_points = lambda distance: ImplicitStart._holds_points(stub, distance)
     residual = np.zeros(20)  # every normal met
     near = np.full(6, 0.009)  # within 0.01 = 0.64 / 64
     one_off, two_off = near.copy(), near.copy()

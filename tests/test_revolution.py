@@ -237,3 +237,47 @@ def test_beyond_its_data_the_profile_keeps_its_radius():
         neck = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(0.6, 0.84, 13)[None, :])
         worst.append(np.abs(surface.value(neck.reshape(-1, 3))).max() / 0.02)
     assert np.mean(worst) < 3.2
+
+
+@pytest.mark.parametrize("kind", ["torus", "revolution"])
+def test_the_grid_fit_prior_is_the_shape_in_the_level_voxels(kind):
+    """A torus or a surface of revolution as the grid fit's prior: its field on a coarser
+    level's grid, in that level's voxels, is its distance divided by the level's spacing."""
+    from warpspec.grid import Grid
+    from warpspec.implicit import ImplicitStart
+    from warpspec.torus import Torus
+
+    synthetic = make_scene("torus" if kind == "torus" else "bottle")
+    scene = synthetic.scene()
+    lo, hi = scene.domain
+    start = ImplicitStart(scene, Grid.from_bounds(lo, hi, resolution=64), "cpu", None)
+    s = synthetic.surface
+    if kind == "torus":
+        start.prior = Torus(np.asarray(s.centre, float), np.asarray(s.axis, float),
+                            float(s.major), float(s.minor))
+    else:
+        heights = np.linspace(-0.6, 1.0, 161)
+        start.prior = SurfaceOfRevolution(np.asarray(s.base, float), np.asarray(s.axis, float),
+                                          heights, np.array([s.radius(h) for h in heights]))
+    level = Grid.from_bounds(lo, hi, resolution=16)
+    out = wp.zeros(level.shape, dtype=float, device="cpu")
+    start._prior_field(level, out, unit=level.spacing)
+    idx = np.stack(np.meshgrid(*[np.arange(n) for n in level.shape], indexing="ij"), axis=-1)
+    exact = start.prior.value(level.origin + level.spacing * idx.reshape(-1, 3))
+    assert np.abs(out.numpy().ravel() - exact / level.spacing).max() < 1e-4
+    assert (exact < 0).any() and (exact > 0).any()
+
+
+def test_a_shape_that_misses_a_few_normals_is_the_grid_fit_prior():
+    """Lamps, the cameras on one ring above the bottle (seed 0): the surface of revolution
+    found has the axis and the points, but misses 3 of the 36 normals by 3.2-3.4 degrees (the
+    shoulder's top), so it is no start by itself. The grid fit then smooths about it, not
+    about the quadric: 0.5 voxel off (about the quadric, a sphere-like blob 5 voxels off)."""
+    synthetic = make_scene("bottle-lamps", rings=1)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert solver.fit_report.shape == "grid"
+    assert solver.fit_report.prior == "revolution"
+    solver.run(1)
+    result = solver.result()
+    err = np.abs(synthetic.surface.implicit(result.vertices))
+    assert err.mean() < 0.75 * result.grid.spacing

@@ -270,6 +270,7 @@ class FitReport:
         pockets: Sealed pockets of the grid fit removed (:func:`fill_pockets`).
         shape: What the start is: ``"quadric"``, ``"torus"``, ``"revolution"`` (a surface of
             revolution), ``"grid"`` (the grid fit) or ``"guess"`` (too little data).
+        prior: What the grid fit smooths about: ``"quadric"``, ``"torus"`` or ``"revolution"``.
         distance: Whether the field written is already a distance near its zero set (the
             quadric's first-order distance ``q / |grad q|``, exact to second order there), so
             that the flow can start from it without a redistance.
@@ -285,9 +286,11 @@ class FitReport:
     distance: bool = False
     pockets: int = 0
     shape: str = "grid"
+    prior: str = "quadric"
 
 
 _THIRD_DIAGONAL: dict[str, float] = {}
+_PRIOR_NAMES = {T.Torus: "torus", R.SurfaceOfRevolution: "revolution"}
 
 
 def _third_diagonal(device) -> float:
@@ -508,6 +511,9 @@ class ImplicitStart:
         """The ring torus taken as the start, when one was."""
         self.revolution: R.SurfaceOfRevolution | None = None
         """The surface of revolution taken as the start, when one was."""
+        self.prior: T.Torus | R.SurfaceOfRevolution | None = None
+        """The closed-form shape the grid fit smooths about (``None``: the quadric)."""
+        self._best: tuple[float, T.Torus | R.SurfaceOfRevolution] | None = None
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -573,6 +579,12 @@ class ImplicitStart:
                 self.quadric, _, _ = Q.fit_quadric(
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))
+            if self._best is not None and self._best[0] > float(
+                    np.mean(self.residual <= QUADRIC_DEG)):
+                # a torus or a surface of revolution that meets more normals than the quadric
+                # but not enough to be the start is a better prior for the grid fit
+                self.prior = self._best[1]
+                self._say(f"the grid fit about the {_PRIOR_NAMES[type(self.prior)]}")
             ladder = level_ladder(max(self.grid.shape) - 1)
             # Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
             # normals it misses by far more than the others'; a stiff fit cannot bend to a
@@ -606,7 +618,8 @@ class ImplicitStart:
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
-                         cg_iterations=cg, distance=not ladder, pockets=pockets, shape=shape)
+                         cg_iterations=cg, distance=not ladder, pockets=pockets, shape=shape,
+                         prior=_PRIOR_NAMES.get(type(self.prior), "quadric"))
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
                 smoothness: float | None = None, third: float | None = None,
@@ -625,7 +638,7 @@ class ImplicitStart:
                            smoothness=SMOOTHNESS if smoothness is None else smoothness,
                            third=THIRD if third is None else third)
             self._use_level_rays(level)
-            self._quadric_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
+            self._prior_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
             level.set_prior(level.p)
             if previous is None:
                 wp.copy(level.f, level.p)
@@ -689,11 +702,19 @@ class ImplicitStart:
         within = np.mean(residual <= QUADRIC_DEG) >= QUADRIC_SHARE
         within &= np.mean((residual > QUADRIC_DEG) & (residual <= REJECT_DEG)) \
             <= QUADRIC_AMBIGUOUS
-        if len(point_distance):
-            size = float(np.max(self.grid.upper - self.grid.origin))
-            within &= float(np.mean(point_distance <= QUADRIC_POINT_SIZE * size)) \
-                >= QUADRIC_POINT_SHARE
-        return bool(within)
+        return bool(within) and self._holds_points(point_distance)
+
+    def _holds_points(self, point_distance: np.ndarray) -> bool:
+        """Whether a shape holds the points (``point_distance``: theirs, world units).
+
+        QUADRIC_POINT_SHARE of them must lie within QUADRIC_POINT_SIZE of the domain's size
+        (with no points, it does).
+        """
+        if not len(point_distance):
+            return True
+        size = float(np.max(self.grid.upper - self.grid.origin))
+        return float(np.mean(point_distance <= QUADRIC_POINT_SIZE * size)) \
+            >= QUADRIC_POINT_SHARE
 
     def _torus(self, guess: Guess) -> T.Torus | None:
         """A ring torus that meets the normals as a quadric start must, or ``None``."""
@@ -780,27 +801,46 @@ class ImplicitStart:
                 accepted = refit
         return accepted
 
-    def _torus_field(self, t: T.Torus, out: wp.array) -> None:
-        """The ring torus' exact distance on the grid."""
-        start = np.asarray(self.grid.origin, dtype=np.float64) - t.centre
-        wp.launch(K.torus_field, dim=self.grid.shape,
-                  inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
-                          wp.vec3(*(float(v) for v in t.axis)), float(t.R), float(t.r)],
+    def _torus_field(self, t: T.Torus, out: wp.array, grid: Grid | None = None, *,
+                     unit: float = 1.0) -> None:
+        """The ring torus' exact distance on ``grid`` (the requested one), in units of ``unit``."""
+        grid = self.grid if grid is None else grid
+        start = (np.asarray(grid.origin, dtype=np.float64) - t.centre) / unit
+        wp.launch(K.torus_field, dim=grid.shape,
+                  inputs=[wp.vec3(*(float(v) for v in start)), float(grid.spacing / unit),
+                          wp.vec3(*(float(v) for v in t.axis)), float(t.R / unit),
+                          float(t.r / unit)],
                   outputs=[out], device=self.device)
 
-    def _revolution_field(self, rev: R.SurfaceOfRevolution, out: wp.array) -> None:
-        """The surface of revolution's first-order distance on the grid."""
-        start = np.asarray(self.grid.origin, dtype=np.float64) - rev.base
+    def _revolution_field(self, rev: R.SurfaceOfRevolution, out: wp.array,
+                          grid: Grid | None = None, *, unit: float = 1.0) -> None:
+        """The surface of revolution's first-order distance on ``grid``, in units of ``unit``."""
+        grid = self.grid if grid is None else grid
+        start = (np.asarray(grid.origin, dtype=np.float64) - rev.base) / unit
 
         def as_array(v: np.ndarray) -> wp.array:
             return wp.array(np.asarray(v, dtype=np.float32), dtype=float, device=self.device)
 
-        wp.launch(K.revolution_field, dim=self.grid.shape,
-                  inputs=[wp.vec3(*(float(v) for v in start)), float(self.grid.spacing),
-                          wp.vec3(*(float(v) for v in rev.axis)), float(rev.heights[0]),
-                          float(rev.heights[1] - rev.heights[0]), as_array(rev.radii),
-                          as_array(rev.slopes())],
+        wp.launch(K.revolution_field, dim=grid.shape,
+                  inputs=[wp.vec3(*(float(v) for v in start)), float(grid.spacing / unit),
+                          wp.vec3(*(float(v) for v in rev.axis)),
+                          float(rev.heights[0] / unit),
+                          float((rev.heights[1] - rev.heights[0]) / unit),
+                          as_array(rev.radii / unit), as_array(rev.slopes())],
                   outputs=[out], device=self.device)
+
+    def _prior_field(self, grid: Grid, out: wp.array, *, unit: float = 1.0) -> None:
+        """The grid fit's prior on ``grid``, in units of ``unit``.
+
+        The quadric, or the torus or surface of revolution that met more normals than it
+        without being the start (:meth:`_accept`).
+        """
+        if isinstance(self.prior, T.Torus):
+            self._torus_field(self.prior, out, grid, unit=unit)
+        elif isinstance(self.prior, R.SurfaceOfRevolution):
+            self._revolution_field(self.prior, out, grid, unit=unit)
+        else:
+            self._quadric_field(grid, out, unit=unit)
 
     def _from_normal_lines(self, guess: Guess, fit: Callable, message: str):
         """A shape fitted to the highlights' normal lines, if it is the start by itself.
@@ -848,7 +888,11 @@ class ImplicitStart:
         if not inside.any():
             return None
         residual = self._residuals(shape, hits, inside)
-        if not self._shape_suffices(residual[inside], np.abs(shape.value(points))):
+        distance = np.abs(shape.value(points))
+        share = float(np.mean(residual <= QUADRIC_DEG))
+        if self._holds_points(distance) and (self._best is None or share > self._best[0]):
+            self._best = (share, shape)  # the grid fit's prior, should none be the start
+        if not self._shape_suffices(residual[inside], distance):
             return None
         self.residual = residual
         self.weights = (inside & (residual <= REJECT_DEG)).astype(float)
