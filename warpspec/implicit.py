@@ -542,7 +542,8 @@ class ImplicitStart:
             other = Q.fit_quadric(self.scene, Q.sphere(ball.centre, ball.radius,
                                                        frame_centre=frame, scale=scale),
                                   lo=lo, hi=hi, voxel=self.grid.spacing)
-            if np.mean(other[2] <= QUADRIC_DEG) > np.mean(self.residual <= QUADRIC_DEG):
+            if self.m and np.mean(other[2] <= QUADRIC_DEG) > np.mean(
+                    self.residual <= QUADRIC_DEG):
                 quad, self.weights, self.residual = other
         self.quadric = quad
         rounds, cg = [], []

@@ -16,6 +16,7 @@ import numpy as np
 from .grid import Grid
 
 __all__ = [
+    "MAX_INSIDE_FRACTION",
     "MAX_NORMAL_ERROR_DEG",
     "MAX_POINT_DISTANCE",
     "MIN_HIT_FRACTION",
@@ -46,6 +47,16 @@ The point term holds the zero set within a few hundredths of a voxel of each poi
 0.005 to 0.4 voxel); the marching-cubes surface of a node-snapped point is within one voxel.
 Two voxels is far beyond either, so a median above it means the surface is not through the
 points."""
+
+MAX_INSIDE_FRACTION = 0.1
+"""Largest fraction of the rays that meet the surface that enter the domain inside it.
+
+A camera sees the object from outside, so a ray reaches its highlight through empty space: one
+that enters the domain where ``phi < 0`` has come through the surface from inside first (a
+tube drawn fat and open at the top, seen from above). Where the surface meets the domain's
+faces a ray entering within half a voxel of it may sample either sign, so a few may. On every
+built-in scene, clean and with a quarter of false highlights, none does; a bottle fitted as a
+fat open blob seen from one ring above: 20 of 36."""
 
 SUPPORT_RADIUS = 3.0
 """A mesh vertex counts as determined by the data within this many voxel widths of a
@@ -95,6 +106,8 @@ class Verdict:
             widths (NaN without points).
         supported_fraction: Fraction of the mesh's vertices within :data:`SUPPORT_RADIUS`
             voxels of a constraint.
+        inside_fraction: Fraction of the rays that meet the surface that enter the domain
+            inside it (NaN without hits or without the rays).
     """
 
     supported: bool
@@ -104,6 +117,7 @@ class Verdict:
     normal_error_deg: float = math.nan
     point_distance: float = math.nan
     supported_fraction: float = 0.0
+    inside_fraction: float = math.nan
 
     def summary(self) -> str:
         """One line: the figures, then ``supported`` or the reasons it is not."""
@@ -129,7 +143,8 @@ class Verdict:
                 "hit_fraction": clean(self.hit_fraction),
                 "normal_error_deg": clean(self.normal_error_deg),
                 "point_distance_voxels": clean(self.point_distance),
-                "supported_fraction": clean(self.supported_fraction)}
+                "supported_fraction": clean(self.supported_fraction),
+                "inside_fraction": clean(self.inside_fraction)}
 
 
 def _sample(phi: np.ndarray, grid: Grid, points: np.ndarray) -> np.ndarray:
@@ -152,6 +167,7 @@ def _gradient_at(phi: np.ndarray, grid: Grid, points: np.ndarray) -> np.ndarray:
 def assess(
     *, phi: np.ndarray, grid: Grid, vertices: np.ndarray, hits: np.ndarray | None,
     demanded_normals: np.ndarray | None, points: np.ndarray,
+    camera_rays: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Verdict, np.ndarray]:
     """The verdict on a result and its support map.
 
@@ -162,6 +178,9 @@ def assess(
         hits: Where each ray meets the surface, ``(M, 3)``, NaN rows for misses.
         demanded_normals: The reflection law's normal at each hit, ``(M, 3)`` (NaN rows ignored).
         points: The point constraints, ``(K, 3)``.
+        camera_rays: The rays' origins and unit directions, ``(M, 3)`` each, for the check that each
+            ray with a hit reaches it from outside (:data:`MAX_INSIDE_FRACTION`); ``None``
+            skips it.
 
     Returns:
         The :class:`Verdict` and the support distance of every vertex (voxel widths).
@@ -194,6 +213,17 @@ def assess(
                 reasons.append(f"the median normal error at the hits is {normal_error:.1f} "
                                f"deg (at most {MAX_NORMAL_ERROR_DEG:g})")
 
+    inside_fraction = math.nan
+    if camera_rays is not None and ok.any():
+        inside = _enters_inside(phi, grid, *(np.asarray(r, dtype=np.float64).reshape(-1, 3)[ok]
+                                             for r in camera_rays))
+        inside_fraction = float(np.mean(inside))
+        if inside_fraction > MAX_INSIDE_FRACTION:
+            reasons.append(f"{int(inside.sum())} of the {int(ok.sum())} rays that meet the "
+                           "surface enter the domain inside it, as if their camera looked "
+                           f"from within the object (at most {100 * MAX_INSIDE_FRACTION:.0f}%"
+                           " may)")
+
     point_distance = math.nan
     if len(points):
         point_distance = float(np.median(np.abs(_sample(phi, grid, points)))) / h
@@ -217,5 +247,25 @@ def assess(
                        "constraint")
     verdict = Verdict(supported=not reasons, reasons=tuple(reasons), rays=rays,
                       hit_fraction=hit_fraction, normal_error_deg=normal_error,
-                      point_distance=point_distance, supported_fraction=supported_fraction)
+                      point_distance=point_distance, supported_fraction=supported_fraction,
+                      inside_fraction=inside_fraction)
     return verdict, support
+
+
+def _enters_inside(phi: np.ndarray, grid: Grid, origins: np.ndarray, dirs: np.ndarray
+                   ) -> np.ndarray:
+    """Whether each ray's level set is negative half a voxel after it enters the grid's box.
+
+    Rays that never enter the box count as outside.
+    """
+    lo, hi = np.asarray(grid.origin, dtype=np.float64), np.asarray(grid.upper, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / dirs
+        a, b = (lo - origins) * inv, (hi - origins) * inv
+    near = np.nan_to_num(np.minimum(a, b), nan=-np.inf)
+    far = np.nan_to_num(np.maximum(a, b), nan=np.inf)
+    t0 = np.maximum(near.max(axis=1), 0.0)
+    t1 = far.min(axis=1)
+    enters = t1 > t0
+    x = np.clip(origins + (t0 + 0.5 * grid.spacing)[:, None] * dirs, lo, hi)
+    return enters & (_sample(phi, grid, x) < 0.0)

@@ -104,16 +104,17 @@ class Result:
 
     def assess(self, scene: Scene) -> Verdict:
         """Compute (again) :attr:`verdict` and :attr:`support` against ``scene``."""
-        normals = None
+        normals = rays = None
         if self.hits is not None and scene.num_specularities:
             hits = np.asarray(self.hits, dtype=np.float64)
             ok = np.all(np.isfinite(hits), axis=1)
-            origins, dirs = scene.rays()
+            rays = scene.rays()
+            origins, dirs = rays
             normals = scene.normals(np.where(ok[:, None], hits, origins + dirs))
             normals[~ok] = np.nan
         self.verdict, self.support = assess(
             phi=self.phi, grid=self.grid, vertices=self.vertices, hits=self.hits,
-            demanded_normals=normals, points=scene.points)
+            demanded_normals=normals, points=scene.points, camera_rays=rays)
         return self.verdict
 
     def save_phi(self, path: str | os.PathLike) -> None:
