@@ -281,3 +281,24 @@ def test_a_shape_that_misses_a_few_normals_is_the_grid_fit_prior():
     result = solver.result()
     err = np.abs(synthetic.surface.implicit(result.vertices))
     assert err.mean() < 0.75 * result.grid.spacing
+
+
+def test_only_a_shape_that_holds_the_points_can_be_the_prior():
+    """A torus moved a tenth along its axis meets most normals' directions yet misses the
+    points: it is neither the start nor the grid fit's prior; the true torus is both."""
+    from warpspec.grid import Grid
+    from warpspec.implicit import ImplicitStart
+    from warpspec.torus import Torus
+
+    synthetic = make_scene("torus")
+    scene = synthetic.scene()
+    lo, hi = scene.domain
+    start = ImplicitStart(scene, Grid.from_bounds(lo, hi, resolution=32), "cpu", None)
+    s = synthetic.surface
+    axis = np.asarray(s.axis, float)
+    moved = Torus(np.asarray(s.centre, float) + 0.1 * axis, axis, float(s.major),
+                  float(s.minor))
+    assert start._accept(moved) is None and start._best is None
+    truth = Torus(np.asarray(s.centre, float), axis, float(s.major), float(s.minor))
+    assert start._accept(truth) is truth
+    assert start._best[1] is truth and start._best[0] > 0.9

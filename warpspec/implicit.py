@@ -70,10 +70,12 @@ QUADRIC_POINT_SIZE = 1.0 / 64.0
 """The points' tolerance, as a share of the domain's largest side."""
 REJECT_DEG = 10.0
 """A ray whose normal a robust pass misses by more than this, and by more than REJECT_SIGMAS
-robust standard deviations of the kept rays' misses, is rejected as false. Three, not four:
-on the point-lit dome with a quarter of its highlights false, a stiff pass's false misses (11-53
-degrees, seed 6) sit among four standard deviations (22) of misses that they inflate."""
+robust standard deviations of the kept rays' misses, is rejected as false."""
 REJECT_SIGMAS = 3.0
+"""Robust standard deviations (1.4826 times the median miss) beyond which a pass rejects a ray.
+Three, not four: on the point-lit dome with a quarter of its highlights false, a stiff pass's
+false misses (11-53 degrees, seed 6) sit among four standard deviations (22) of the misses they
+inflate."""
 RETURN_DEG = 15.0
 """A rejected ray comes back when the final fit, made without it, meets its normal this closely
 (or within the kept rays' threshold): a miss out of sample is larger than one in sample."""
@@ -272,7 +274,8 @@ class FitReport:
         pockets: Sealed pockets of the grid fit removed (:func:`fill_pockets`).
         shape: What the start is: ``"quadric"``, ``"torus"``, ``"revolution"`` (a surface of
             revolution), ``"grid"`` (the grid fit) or ``"guess"`` (too little data).
-        prior: What the grid fit smooths about: ``"quadric"``, ``"torus"`` or ``"revolution"``.
+        prior: What the grid fit smooths about: ``"quadric"``, ``"torus"`` or
+            ``"revolution"`` (``None`` when the start is no grid fit).
         distance: Whether the field written is already a distance near its zero set (the
             quadric's first-order distance ``q / |grad q|``, exact to second order there), so
             that the flow can start from it without a redistance.
@@ -288,7 +291,7 @@ class FitReport:
     distance: bool = False
     pockets: int = 0
     shape: str = "grid"
-    prior: str = "quadric"
+    prior: str | None = "quadric"
 
 
 _THIRD_DIAGONAL: dict[str, float] = {}
@@ -521,6 +524,7 @@ class ImplicitStart:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
         guess = first_guess(self.scene, self.grid, self.plane)
         self._one_side = guess.kind == "plane"
+        self.torus = self.revolution = self.prior = self._best = None
         lo, hi = self.grid.origin, self.grid.upper
         frame = 0.5 * (lo + hi)
         scale = 0.5 * float(np.max(hi - lo))
@@ -571,7 +575,16 @@ class ImplicitStart:
             shape = "revolution"
             self._revolution_field(revolution, out)
         else:
-            if guess.kind == "plane" and max(
+            if self._best is not None and self._best[0] > float(
+                    np.mean(self.residual <= QUADRIC_DEG)):
+                # a torus or a surface of revolution that meets more normals than the quadric
+                # (shares of every ray, 180 degrees off where a ray misses the shape) but not
+                # enough to be the start is a better prior for the grid fit; it is a closed
+                # object or a tube, so only its cavities are sealed pockets
+                self.prior = self._best[1]
+                self._one_side = False
+                self._say(f"the grid fit about the {_PRIOR_NAMES[type(self.prior)]}")
+            elif guess.kind == "plane" and max(
                     self.quadric.sheets_crossed(*self.scene.rays(), lo, hi),
                     self.quadric.sheets_crossed(*columns(guess.normal, lo, hi), lo, hi)) > 1:
                 # seen from one side, a surface is crossed once by each ray, and once by each
@@ -582,12 +595,6 @@ class ImplicitStart:
                 self.quadric, _, _ = Q.fit_quadric(
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))
-            if self._best is not None and self._best[0] > float(
-                    np.mean(self.residual <= QUADRIC_DEG)):
-                # a torus or a surface of revolution that meets more normals than the quadric
-                # but not enough to be the start is a better prior for the grid fit
-                self.prior = self._best[1]
-                self._say(f"the grid fit about the {_PRIOR_NAMES[type(self.prior)]}")
             ladder = level_ladder(max(self.grid.shape) - 1)
             # Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
             # normals it misses by far more than the others'; a stiff fit cannot bend to a
@@ -622,7 +629,8 @@ class ImplicitStart:
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
                          cg_iterations=cg, distance=not ladder, pockets=pockets, shape=shape,
-                         prior=_PRIOR_NAMES.get(type(self.prior), "quadric"))
+                         prior=(_PRIOR_NAMES.get(type(self.prior), "quadric")
+                                if shape == "grid" else None))
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
                 smoothness: float | None = None, third: float | None = None,
@@ -806,7 +814,7 @@ class ImplicitStart:
 
     def _torus_field(self, t: T.Torus, out: wp.array, grid: Grid | None = None, *,
                      unit: float = 1.0) -> None:
-        """The ring torus' exact distance on ``grid`` (the requested one), in units of ``unit``."""
+        """The ring torus' exact distance on ``grid`` (default: the requested one), per ``unit``."""
         grid = self.grid if grid is None else grid
         start = (np.asarray(grid.origin, dtype=np.float64) - t.centre) / unit
         wp.launch(K.torus_field, dim=grid.shape,
@@ -817,7 +825,10 @@ class ImplicitStart:
 
     def _revolution_field(self, rev: R.SurfaceOfRevolution, out: wp.array,
                           grid: Grid | None = None, *, unit: float = 1.0) -> None:
-        """The surface of revolution's first-order distance on ``grid``, in units of ``unit``."""
+        """The surface of revolution's first-order distance on ``grid``, per ``unit``.
+
+        ``grid`` defaults to the requested one.
+        """
         grid = self.grid if grid is None else grid
         start = (np.asarray(grid.origin, dtype=np.float64) - rev.base) / unit
 
