@@ -302,3 +302,31 @@ def test_only_a_shape_that_holds_the_points_can_be_the_prior():
     truth = Torus(np.asarray(s.centre, float), axis, float(s.major), float(s.minor))
     assert start._accept(truth) is truth
     assert start._best[1] is truth and start._best[0] > 0.9
+
+
+def test_the_cameras_ring_gives_an_axis_when_the_quadric_does_not():
+    """Camera centres on a tilted ring (a little jitter): its axis; on a line, or fewer than
+    three: none. Under lamps from one ring above with a quarter false (seed 0), the quadric's
+    hits give an axis 45 degrees off; from the ring the bottle is found (was a fat blob 5.6
+    voxels off, which the verdict refuses)."""
+    from warpspec.implicit import camera_ring
+
+    rng = np.random.default_rng(0)
+    axis = np.array([0.2, -0.1, 1.0]) / np.linalg.norm([0.2, -0.1, 1.0])
+    u = np.cross(axis, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(axis, u)
+    t = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    centre = np.array([0.3, 0.1, 0.7])
+    ring = centre + 1.6 * (np.cos(t)[:, None] * u + np.sin(t)[:, None] * w)
+    ring = ring + 0.01 * rng.standard_normal(ring.shape)
+    c, a = camera_ring(np.repeat(ring, 2, axis=0))  # two highlights per camera
+    assert abs(abs(float(a @ axis)) - 1.0) < 1e-3
+    assert np.linalg.norm(np.cross(c - centre, axis)) < 0.02
+    assert camera_ring(np.outer(np.arange(5.0), axis)) is None
+    assert camera_ring(ring[:2]) is None
+    synthetic = make_scene("bottle-lamps", rings=1, outliers=0.25)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert solver.fit_report.shape in ("revolution", "grid")
+    result, err = _run(synthetic, solver, 1)
+    assert err < 0.75 and result.verdict.supported
