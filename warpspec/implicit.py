@@ -782,12 +782,13 @@ class ImplicitStart:
         # the first axis from the normal lines through the rays' hits on the quadric; false
         # highlights pull the quadric, and with it that axis, several degrees off, so the
         # hits on each shape not taken give the next one, while each meets more normals
-        def fit(rays: np.ndarray, normals: np.ndarray, axis: tuple[np.ndarray, np.ndarray]):
+        def fit(rays: np.ndarray, normals: np.ndarray, axis: tuple[np.ndarray, np.ndarray],
+                tilted: bool = True):
             # the rays' normals asked at their hits on the shape before (a point light's
             # depend on them); the new shape and its own hits
             shape = R.fit_revolution_lit(origins[rays], dirs[rays], normals[rays],
                                          self.scene.points, lo=lo, hi=hi, voxel=voxel,
-                                         axis=axis)
+                                         axis=axis, tilted=tilted)
             if shape is None:
                 return None, None, None
             return shape, *shape.intersect(origins, dirs, lo, hi, step=voxel)
@@ -835,10 +836,12 @@ class ImplicitStart:
             return None
         kept = inside & (self.residual <= REJECT_DEG)
         if np.any(use & ~kept) and int(kept.sum()) >= R.MIN_RAYS:
-            # fitted with rays it rejects: fitted again without them, from its own axis
+            # fitted with rays it rejects: fitted again without them, from its own axis, which
+            # is refined alone (the tilted starts found the same shape on bottle-lamps seeds
+            # 0-5 at 10% and 25% false, in 24% more time)
             self._say("a surface of revolution fitted again without the rejected highlights")
             shape, hits, inside = fit(kept, self.scene.normals(hits),
-                                      (accepted.base, accepted.axis))
+                                      (accepted.base, accepted.axis), tilted=False)
             if shape is not None and (refit := self._accept(shape, hits, inside)) is not None:
                 accepted = refit
         return accepted

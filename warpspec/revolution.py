@@ -375,7 +375,8 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
 
 def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
                        points: np.ndarray, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
-                       axis: tuple[np.ndarray, np.ndarray]) -> SurfaceOfRevolution | None:
+                       axis: tuple[np.ndarray, np.ndarray], tilted: bool = True
+                       ) -> SurfaceOfRevolution | None:
     """Fit a surface of revolution to rays whose normals are known but are no normal lines.
 
     Under a light that is not at the camera a ray is not a normal line, but given the axis
@@ -395,6 +396,8 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
         hi: The domain's upper corner.
         voxel: The grid's spacing.
         axis: A first guess of the axis (a point, a unit direction).
+        tilted: Also start from the :data:`LIT_STARTS` tilted directions (``False``: refine
+            ``axis`` alone, when it is already near).
 
     Returns:
         The surface, or ``None`` when fewer than :data:`MIN_RAYS` rays or no point are given.
@@ -412,7 +415,8 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
     u, w = plane_frame(a0)[:2]
     tilt = np.tan(np.radians(LIT_TILT_DEG))
     starts = [a0] + [a0 + tilt * (np.cos(t) * u + np.sin(t) * w)
-                     for t in np.linspace(0.0, 2.0 * np.pi, LIT_STARTS, endpoint=False)]
+                     for t in np.linspace(0.0, 2.0 * np.pi, LIT_STARTS if tilted else 0,
+                                          endpoint=False)]
     best = None
     for a in starts:
         c, a = c0, a / np.linalg.norm(a)
