@@ -38,7 +38,7 @@ from . import quadric as Q
 from . import revolution as R
 from . import torus as T
 from ._parallel import launch_halves
-from .geometry import LIGHT_CAMERA, LIGHT_POINT, plane_frame
+from .geometry import LIGHT_CAMERA, LIGHT_POINT, best_fit_plane, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
 from .normal_lines import best_axis
@@ -175,17 +175,12 @@ def ray_convergence(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray | None:
 def camera_ring(centres: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The axis (a point, a unit direction) of the ring the camera centres stand on, or None.
 
-    The normal of their best-fit plane through their mean; ``None`` with fewer than three
-    distinct centres or when they lie on a line (no ring).
+    The normal of their best-fit plane through their mean (:func:`best_fit_plane`); ``None``
+    with fewer than three distinct centres or when they lie on a line (no ring).
     """
-    c = np.unique(np.asarray(centres, dtype=np.float64).reshape(-1, 3), axis=0)
-    if len(c) < 3:
-        return None
-    mean = c.mean(axis=0)
-    _, sv, vt = np.linalg.svd(c - mean, full_matrices=False)
-    if sv[1] <= 1e-9 * max(sv[0], 1e-300):
-        return None
-    return mean, vt[2]
+    mean, axes = best_fit_plane(np.unique(np.asarray(centres, dtype=np.float64)
+                                          .reshape(-1, 3), axis=0))
+    return None if axes is None else (mean, axes[2])
 
 
 def surrounds(directions: np.ndarray) -> bool:
@@ -797,43 +792,44 @@ class ImplicitStart:
             """The shape taken from this first axis (``None``: the quadric's hits' axis).
 
             With the rays' hits on it, which of them enter the domain and the rays it was
-            fitted to (all ``None`` when none is taken).
+            fitted to; ``None`` when none is taken.
             """
             hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
             use = inside
             met = 0.0
             for _ in range(1 + LIT_REFITS):
                 if int(use.sum()) < R.MIN_RAYS:
-                    return None, None, None, None
+                    return None
                 normals = self.scene.normals(hits)
                 c, a = best_axis(hits[use], normals[use]) if first is None else first
                 first = None
                 if c is None:
-                    return None, None, None, None
+                    return None
                 shape, hits, inside = fit(use, normals, (c, a))
                 if shape is None:
-                    return None, None, None, None
+                    return None
                 if (accepted := self._accept(shape, hits, inside)) is not None:
                     return accepted, hits, inside, use
                 residual = self._residuals(shape, hits, inside)
                 share = float(np.mean(residual[inside] <= QUADRIC_DEG))
                 if share <= met:
-                    return None, None, None, None
+                    return None
                 met = share
                 # the next fit takes only the rays this one meets within REJECT_DEG: a shape
                 # near the truth misses the false highlights by far, and their normal lines
                 # would pull the next axis off again
                 use = inside & (residual <= REJECT_DEG)
-            return None, None, None, None
+            return None
 
-        accepted, hits, inside, use = attempt(None)
-        if accepted is None and (ring := camera_ring(origins)) is not None:
+        found = attempt(None)
+        if found is None and (ring := camera_ring(origins)) is not None:
             # false highlights can pull the quadric, and the axis through its hits, tens of
             # degrees off; cameras walked round an object stand on a ring about its axis
             self._say("a surface of revolution fitted from the cameras' ring")
-            accepted, hits, inside, use = attempt(ring)
-        if accepted is None:
+            found = attempt(ring)
+        if found is None:
             return None
+        accepted, hits, inside, use = found
         kept = inside & (self.residual <= REJECT_DEG)
         if np.any(use & ~kept) and int(kept.sum()) >= R.MIN_RAYS:
             # fitted with rays it rejects: fitted again without them, from its own axis, which
