@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError, SceneError
-from .scene import Light, Scene, SceneWarning
+from .scene import Light, Scene, SceneWarning, ray_box_span
 
 __all__ = [
     "CAMERA_MODELS",
@@ -1100,13 +1100,7 @@ def select_object_points(
 
 def _ray_box(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Whether each ray ``o + t d``, ``t > 0``, passes through the box."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (lo - o) / d
-        t2 = (hi - o) / d
-    flat = d == 0
-    inside = (o >= lo) & (o <= hi)
-    tmin = np.where(flat, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=1)
-    tmax = np.where(flat, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=1)
+    tmin, tmax = ray_box_span(o, d, lo, hi)
     return (tmax >= np.maximum(tmin, 0.0)) & (tmax > 0)
 
 

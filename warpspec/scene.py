@@ -1033,10 +1033,18 @@ def _camera_centre(P: np.ndarray, field: str) -> np.ndarray:
     return centre
 
 
-def _ray_box(
+def ray_box_span(
     origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Slab test: whether each ray's line meets the box, and whether it does so ahead (t >= 0)."""
+    """Slab test: where each ray's line ``o + t d`` enters and leaves the box ``[lo, hi]``.
+
+    Returns:
+        ``(near, far)``, the parameters ``t`` of the entry and the exit ``(M,)`` (``near >
+        far``: the line misses the box; a direction component of 0 inside its slab, faces
+        included, bounds nothing).
+    """
+    origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         inv = 1.0 / dirs
         t1 = (lo - origins) * inv
@@ -1047,6 +1055,14 @@ def _ray_box(
     tmax = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
     near = tmin.max(axis=1) if len(tmin) else np.zeros(0)
     far = tmax.min(axis=1) if len(tmax) else np.zeros(0)
+    return near, far
+
+
+def _ray_box(
+    origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Slab test: whether each ray's line meets the box, and whether it does so ahead (t >= 0)."""
+    near, far = ray_box_span(origins, dirs, lo, hi)
     hits = near <= far
     return hits, hits & (far >= 0)
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .grid import Grid
+from .scene import ray_box_span
 
 __all__ = [
     "MAX_INSIDE_FRACTION",
@@ -268,15 +269,12 @@ def _enters_inside(phi: np.ndarray, grid: Grid, origins: np.ndarray, dirs: np.nd
     not sampled beyond. Rays that never enter the box count as outside.
     """
     lo, hi = np.asarray(grid.origin, dtype=np.float64), np.asarray(grid.upper, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / dirs
-        a, b = (lo - origins) * inv, (hi - origins) * inv
-    near = np.nan_to_num(np.minimum(a, b), nan=-np.inf)
-    far = np.nan_to_num(np.maximum(a, b), nan=np.inf)
-    t0 = np.maximum(near.max(axis=1), 0.0)
-    t1 = far.min(axis=1)
-    enters = t1 > t0
-    to_hit = np.einsum("ij,ij->i", hits - origins, dirs) - t0
+    near, far = ray_box_span(origins, dirs, lo, hi)
+    t0 = np.maximum(near, 0.0)
+    enters = far > t0
+    t0, o, d = t0[enters], origins[enters], dirs[enters]
+    to_hit = np.einsum("ij,ij->i", hits[enters] - o, d) - t0
     step = np.clip(0.5 * to_hit, 0.0, 0.5 * grid.spacing)
-    x = np.clip(origins + (t0 + step)[:, None] * dirs, lo, hi)
-    return enters & (_sample(phi, grid, x) < 0.0)
+    inside = np.zeros(len(origins), dtype=bool)
+    inside[enters] = _sample(phi, grid, np.clip(o + (t0 + step)[:, None] * d, lo, hi)) < 0.0
+    return inside
