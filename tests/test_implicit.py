@@ -442,6 +442,28 @@ def test_cameras_surround_only_when_no_half_space_holds_them():
     assert first_guess(scene, grid, initial_plane(scene, grid)).kind == "plane"
 
 
+
+def test_surrounds_agrees_with_the_linear_program_on_random_cameras():
+    """The shortcut (the mean direction's half-space) never changes the answer: caps of
+    directions from narrow to wider than a hemisphere, against scipy's linprog itself."""
+    from scipy.optimize import linprog
+
+    from warpspec.implicit import surrounds
+
+    rng = np.random.default_rng(7)
+    answers = []
+    for _ in range(120):
+        count = int(rng.integers(3, 40))
+        centre = rng.standard_normal(3)
+        u = centre / np.linalg.norm(centre) + rng.uniform(0.2, 2.5) * rng.standard_normal(
+            (count, 3))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        fit = linprog(np.zeros(3), A_ub=-u, b_ub=-np.ones(count),
+                      bounds=[(None, None)] * 3, method="highs")
+        assert surrounds(u) == (fit.status == 2)
+        answers.append(fit.status == 2)
+    assert 20 < sum(answers) < 100  # both answers are tested
+
 def test_columns_sweep_the_box_and_find_a_second_sheet():
     from warpspec.implicit import columns
 

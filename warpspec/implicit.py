@@ -137,6 +137,8 @@ RING_LENGTH = 0.4
 when their mean direction (:attr:`Guess.lean`) is shorter than this: 0.17-0.31 for a ring
 30 degrees or less above a bottle, 0.48-0.97 for the cameras over this package's patches
 (the point-lit dome's 0.48 cost it 6 s at 0.5)."""
+SURROUND_STEPS = 1000
+"""Perceptron steps :func:`surrounds` takes before it solves its linear program."""
 
 
 def level_ladder(resolution: int) -> list[int]:
@@ -191,11 +193,21 @@ def surrounds(directions: np.ndarray) -> bool:
     for every direction ``u``. The mean direction is no such test: a camera a little below
     the horizon of a patch seen from above would call it surrounded.
     """
-    from scipy.optimize import linprog
-
     u = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     if len(u) == 0:
         return False
+    # a perceptron first: it finds a half-space holding them all within 1 / margin^2 steps
+    # when there is one (a scene seen from one side), and then the linear program is not
+    # needed (importing scipy.optimize costs 0.3-0.5 s of a run)
+    m = u.sum(axis=0)
+    for _ in range(SURROUND_STEPS):
+        s = u @ m
+        worst = int(np.argmin(s))
+        if s[worst] > 1e-9 * max(float(np.linalg.norm(m)), 1e-300):
+            return False
+        m = m + u[worst]
+    from scipy.optimize import linprog
+
     fit = linprog(np.zeros(3), A_ub=-u, b_ub=-np.ones(len(u)), bounds=[(None, None)] * 3,
                   method="highs")
     return fit.status == 2  # infeasible: no half-space holds them
