@@ -19,7 +19,8 @@
    reflection) is rejected and reported instead of bending the surface. A supple fit follows
    a false normal too, so rejection is decided by robust passes on the coarse levels, stiff to
    supple (:data:`ROBUST_SMOOTHNESS`); a rejected ray that the final fit, made without it,
-   meets after all comes back.
+   meets after all comes back, and the ladder is refitted from that fit
+   (:data:`RETURN_ROUNDS`).
 
 See docs/DESIGN.md section 7.
 """
@@ -137,6 +138,8 @@ RING_LENGTH = 0.4
 when their mean direction (:attr:`Guess.lean`) is shorter than this: 0.17-0.31 for a ring
 30 degrees or less above a bottle, 0.48-0.97 for the cameras over this package's patches
 (the point-lit dome's 0.48 cost it 6 s at 0.5)."""
+RETURN_ROUNDS = 3
+"""Most ladders refitted with rejected rays that came back (each from the fit before)."""
 SURROUND_STEPS = 1000
 """Perceptron steps :func:`surrounds` takes before it solves its linear program."""
 
@@ -623,7 +626,9 @@ class ImplicitStart:
             # normals it misses by far more than the others'; a stiff fit cannot bend to a
             # false normal, and a supple one no longer feels those already gone. Then the
             # whole ladder without them, and the rejected rays whose normals that fit meets
-            # after all (a stiff pass also misses a sharp but true bend) come back.
+            # after all (a stiff pass also misses a sharp but true bend) come back, with the
+            # ladder refitted from that fit (from the prior, a grazing ray back would be met
+            # where it first crossed the prior again, far before its true hit)
             self.excluded = np.zeros(self.m, dtype=bool)
             coarse = [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
             for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
@@ -633,14 +638,17 @@ class ImplicitStart:
                              quiet=True)
                 self.excluded |= self._outliers()
             previous = self._ladder(ladder, rounds, cg)
-            if self.excluded.any():
+            for _ in range(RETURN_ROUNDS):
+                if not self.excluded.any():
+                    break
                 self._anchor(previous)
                 self._update_weights(previous)
                 back = self.excluded & (self.residual <= max(self._threshold(), RETURN_DEG))
-                if back.any():
-                    self.excluded &= ~back
-                    self._say(f"the ladder again, {int(back.sum())} rejected highlights back")
-                    previous = self._ladder(ladder, rounds, cg, quiet=True)
+                if not back.any():
+                    break
+                self.excluded &= ~back
+                self._say(f"the ladder again, {int(back.sum())} rejected highlights back")
+                previous = self._ladder(ladder, rounds, cg, quiet=True, start=previous)
             self._anchor(previous)
             self._update_weights(previous)
             self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
@@ -657,8 +665,11 @@ class ImplicitStart:
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
                 smoothness: float | None = None, third: float | None = None,
-                quiet: bool = False) -> _Level:
-        """Fit on every level of the ladder, each started from the one below."""
+                quiet: bool = False, start: _Level | None = None) -> _Level:
+        """Fit on every level of the ladder, each started from the one below.
+
+        The first level starts from the prior, or from ``start`` (a fit already made).
+        """
         lo, hi = self.grid.origin, self.grid.upper
         previous: _Level | None = None
         self.weights = np.where(self.excluded, 0.0, 1.0)
@@ -674,11 +685,12 @@ class ImplicitStart:
             self._use_level_rays(level)
             self._prior_field(grid, level.p, unit=grid.spacing)  # the prior, in voxels
             level.set_prior(level.p)
-            if previous is None:
+            below = previous if previous is not None else start
+            if below is None:
                 wp.copy(level.f, level.p)
             else:
                 wp.launch(K.resample, dim=grid.shape,
-                          inputs=[previous.f, previous.world_h / level.world_h],
+                          inputs=[below.f, below.world_h / level.world_h],
                           outputs=[level.f], device=self.device)
             fine = last or res > FINE_ABOVE
             n_rounds = ROUNDS_FINE if fine else ROUNDS_COARSE
