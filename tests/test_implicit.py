@@ -453,10 +453,9 @@ def test_cameras_surround_only_when_no_half_space_holds_them():
     assert first_guess(scene, grid, initial_plane(scene, grid)).kind == "plane"
 
 
-
 def test_surrounds_agrees_with_the_linear_program_on_random_cameras():
-    """The shortcut (the mean direction's half-space) never changes the answer: caps of
-    directions from narrow to wider than a hemisphere, against scipy's linprog itself."""
+    """The shortcut (a perceptron's half-space) never changes the answer: caps of directions
+    from narrow to wider than a hemisphere, against scipy's linprog itself."""
     from scipy.optimize import linprog
 
     from warpspec.implicit import surrounds
@@ -474,6 +473,7 @@ def test_surrounds_agrees_with_the_linear_program_on_random_cameras():
         assert surrounds(u) == (fit.status == 2)
         answers.append(fit.status == 2)
     assert 20 < sum(answers) < 100  # both answers are tested
+
 
 def test_columns_sweep_the_box_and_find_a_second_sheet():
     from warpspec.implicit import columns

@@ -192,9 +192,10 @@ def surrounds(directions: np.ndarray) -> bool:
     """Whether unit ``directions`` ``(K, 3)`` leave no open half-space holding them all.
 
     Cameras seen from the rays' convergence point in such directions stand all around it. A
-    linear feasibility problem (scipy's HiGHS): one side when some ``m`` has ``u . m >= 1``
-    for every direction ``u``. The mean direction is no such test: a camera a little below
-    the horizon of a patch seen from above would call it surrounded.
+    linear feasibility problem: one side when some ``m`` has ``u . m >= 1`` for every
+    direction ``u`` (a perceptron's ``m``, or else scipy's HiGHS decides). The mean
+    direction is no such test: a camera a little below the horizon of a patch seen from above
+    would call it surrounded.
     """
     u = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     if len(u) == 0:
