@@ -38,6 +38,7 @@ __all__ = [
     "camera_centre",
     "crop_to_data_hull",
     "crop_to_hull",
+    "crop_to_unwrapped_hull",
     "hull_region",
     "pixel_rays",
     "plane_frame",
@@ -421,38 +422,134 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
     hull on their best-fit plane, each grown by ``margin`` (the 3-D hull alone is a thin slab
     for flat data, whose facets reach far sideways; the 2-D one alone folds a patch that wraps
     past 180 degrees onto itself). A hull that cannot be built (too few anchors, all on a
-    line or a plane) does not crop.
+    line or a plane) does not crop. A surface bending round an axis is better cropped by
+    :func:`crop_to_unwrapped_hull`: the 3-D hull's facets cut chords under its rims.
 
     Returns:
         The kept vertices and faces (re-indexed).
     """
-    from scipy.spatial import ConvexHull, QhullError
-
-    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    anchors = _hull_anchors(anchors)
     faces = np.asarray(faces)
     if len(anchors) < 4 or len(faces) == 0:
         return vertices, faces
-    if len(anchors) > HULL_ANCHORS:
-        # a dense cloud: its hull is as good from an even subset, and the facets stay few
-        anchors = anchors[np.linspace(0, len(anchors) - 1, HULL_ANCHORS).astype(np.int64)]
     centre = anchors.mean(axis=0)
     scale = float(np.max(np.abs(anchors - centre))) or 1.0
     a = (anchors - centre) / scale
     x = (np.asarray(vertices)[faces].mean(axis=1) - centre) / scale
-    m = margin / scale
     keep = np.ones(len(faces), dtype=bool)
     _, _, vt = np.linalg.svd(a, full_matrices=False)
     for points, queries in ((a, x), (a @ vt[:2].T, x @ vt[:2].T)):
-        try:
-            hull = ConvexHull(points)
-        except (QhullError, ValueError):
-            continue
-        d = hull.equations.shape[1] - 1
-        normals, offsets = hull.equations[:, :d].T, hull.equations[:, d]
-        chunk = max(1, HULL_CHUNK // len(offsets))  # bounded memory: faces x facets
-        for k in range(0, len(queries), chunk):
-            q = queries[k:k + chunk]
-            keep[k:k + chunk] &= (q @ normals + offsets).max(axis=1) <= m
+        keep &= _within_hull(points, queries, margin / scale)
+    return _keep_faces(vertices, faces, keep)
+
+
+WRAP_MIN_GAP_DEG = 30.0
+"""The smallest empty arc of the anchors round the axis that :func:`crop_to_unwrapped_hull`
+cuts the unwrapping at; with none as wide the anchors go all round and it does not crop."""
+
+
+def crop_to_unwrapped_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray,
+                           hits: np.ndarray, normals: np.ndarray, *, margin: float
+                           ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Keep the faces of a surface bending round an axis that lie over its data, unwrapped.
+
+    The axis is the direction the normals at the hits have least of (their smallest
+    principal direction) and passes through the point nearest, in least squares, to the
+    normal lines ``hits + t normals`` seen along it. Anchors and face centres are mapped to
+    the surface's own coordinates round it: the arc length (the angle, cut at the middle of
+    the anchors' widest empty arc, times their median distance from the axis) and the height
+    along it. A face is kept when it lies within ``margin`` of the anchors' 2-D convex hull
+    there. Unlike the 3-D hull, whose facets are chords cutting under a curved patch's rims
+    wherever the anchors thin out, this follows the patch round; the part of the surface
+    behind the data (the widest empty arc) lies outside it.
+
+    Args:
+        vertices: Mesh vertices ``(V, 3)``.
+        faces: Mesh faces ``(F, 3)``.
+        anchors: The constraints' positions ``(K, 3)`` (rays' hits and points).
+        hits: Hits whose normals are known ``(M, 3)``.
+        normals: Unit normals at ``hits`` ``(M, 3)``.
+        margin: Growth of the hull in world units.
+
+    Returns:
+        The kept vertices and faces (re-indexed), or ``None`` when the normals fix no axis or
+        the anchors go all round it (leave no arc of :data:`WRAP_MIN_GAP_DEG` empty).
+    """
+    anchors = _hull_anchors(anchors)
+    hits = np.asarray(hits, dtype=np.float64).reshape(-1, 3)
+    normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces)
+    if len(anchors) < 4 or len(faces) == 0 or len(hits) < 3:
+        return None
+    _, _, vt = np.linalg.svd(normals, full_matrices=False)
+    plane = vt[:2]
+    # the axis' point: least squares over the normal lines, in the plane across the axis
+    p, n = hits @ plane.T, normals @ plane.T
+    length = np.linalg.norm(n, axis=1)
+    ok = length > 0.5  # normals mostly across the axis
+    n = n[ok] / length[ok, None]
+    across = np.eye(2)[None] - n[:, :, None] * n[:, None, :]
+    lhs = across.sum(axis=0)
+    if ok.sum() < 2 or np.linalg.cond(lhs) > 1e6:
+        return None
+    centre = np.linalg.solve(lhs, np.einsum("kij,kj->i", across, p[ok]))
+
+    def unwrap(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d = x @ plane.T - centre
+        return np.arctan2(d[:, 1], d[:, 0]), np.linalg.norm(d, axis=1), x @ vt[2]
+
+    angle, radius, height = unwrap(anchors)
+    order = np.sort(angle)
+    gaps = np.diff(np.concatenate([order, order[:1] + 2.0 * np.pi]))
+    widest = int(np.argmax(gaps))
+    if np.degrees(gaps[widest]) < WRAP_MIN_GAP_DEG:
+        return None
+    cut = order[widest] + 0.5 * gaps[widest]
+    arc = float(np.median(radius))
+    if not arc > 0.0:
+        return None
+
+    def coordinates(x: np.ndarray) -> np.ndarray:
+        a, _, z = unwrap(x)
+        return np.stack([arc * np.mod(a - cut, 2.0 * np.pi), z], axis=1)
+
+    scale = max(arc * 2.0 * np.pi, float(np.ptp(height))) or 1.0
+    a = coordinates(anchors) / scale
+    x = coordinates(np.asarray(vertices)[faces].mean(axis=1)) / scale
+    return _keep_faces(vertices, faces, _within_hull(a, x, margin / scale))
+
+
+def _hull_anchors(anchors: np.ndarray) -> np.ndarray:
+    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    if len(anchors) > HULL_ANCHORS:
+        # a dense cloud: its hull is as good from an even subset, and the facets stay few
+        anchors = anchors[np.linspace(0, len(anchors) - 1, HULL_ANCHORS).astype(np.int64)]
+    return anchors
+
+
+def _within_hull(points: np.ndarray, queries: np.ndarray, margin: float) -> np.ndarray:
+    """Whether each query lies within ``margin`` of the points' convex hull.
+
+    All ``True`` when it cannot be built: too few points, or all in a lower-dimensional flat.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    keep = np.ones(len(queries), dtype=bool)
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return keep
+    d = hull.equations.shape[1] - 1
+    normals, offsets = hull.equations[:, :d].T, hull.equations[:, d]
+    chunk = max(1, HULL_CHUNK // len(offsets))  # bounded memory: faces x facets
+    for k in range(0, len(queries), chunk):
+        keep[k:k + chunk] = (queries[k:k + chunk] @ normals + offsets).max(axis=1) <= margin
+    return keep
+
+
+def _keep_faces(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The faces ``keep`` marks, re-indexed; all of them when it marks none or all."""
     if not keep.any() or keep.all():
         return vertices, faces
     kept = faces[keep]
