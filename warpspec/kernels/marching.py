@@ -23,11 +23,14 @@ import numpy as np
 import warp as wp
 from warp.geometry import IsoSurfaceMarchingCubes as _Tables
 
+from ..mesh import NODE_CLEARANCE
 from .band import band_slot, unflatten
 
 wp.set_module_options({"enable_backward": False})
 
 __all__ = ["Tables", "count_kernel", "faces_kernel", "tables", "vertices_kernel"]
+
+_CLEARANCE = wp.constant(NODE_CLEARANCE)
 
 
 def _edge_offsets() -> np.ndarray:
@@ -166,7 +169,7 @@ def vertices_kernel(
                     edge_slot[n[0], n[1], n[2], axis] = slot
                     edge_node[slot] = n
                     edge_axis[slot] = axis
-                    edge_t[slot] = p / (p - q)
+                    edge_t[slot] = wp.clamp(p / (p - q), _CLEARANCE, 1.0 - _CLEARANCE)
 
 
 @wp.kernel
