@@ -330,6 +330,21 @@ def test_mesh_pieces_far_from_the_data_are_dropped():
     assert not is_open(kept_f)
 
 
+def test_specks_of_the_level_set_are_dropped_even_beside_the_data():
+    grid = Grid(origin=np.zeros(3), spacing=0.1, shape=(31, 31, 31))
+    x, y, z = grid.coordinates()
+    body = np.sqrt((x - 1.5) ** 2 + (y - 1.5) ** 2 + (z - 1.5) ** 2) - 0.8
+    speck = np.sqrt((x - 2.54) ** 2 + (y - 1.52) ** 2 + (z - 1.53) ** 2) - 0.06  # a voxel
+    v, f = triangulate(np.minimum(body, speck), grid)
+    anchors = np.array([[2.3, 1.5, 1.5], [1.5, 1.5, 2.3]])  # the first beside the speck
+    kept_v, kept_f = supported_components(v, f, anchors, radius=0.3)
+    assert len(kept_f) == len(f)  # near the data: kept without a least size
+    kept_v, kept_f = supported_components(v, f, anchors, radius=0.3, min_extent=0.2)
+    assert 0 < len(f) - len(kept_f) < 50
+    assert np.all(np.abs(np.linalg.norm(kept_v - 1.5, axis=1) - 0.8) < 0.02)
+    assert not is_open(kept_f)
+
+
 def test_open_surface_is_cropped_to_the_hull_of_the_data():
     grid = Grid(origin=np.zeros(3), spacing=0.1, shape=(31, 31, 31))
     _, _, z = grid.coordinates()

@@ -278,9 +278,9 @@ def supported_components(vertices: np.ndarray, faces: np.ndarray, anchors: np.nd
     corner). A piece is kept when one of its vertices lies within ``radius`` of an anchor (a ray
     intersection or a point constraint); with no anchors the mesh is returned unchanged. A
     piece whose bounding box has a diagonal shorter than ``min_extent`` is dropped wherever it
-    lies: a speck of the level set a voxel across (two faces that close on each other beside a
-    bottle's shoulder gave the open tube an Euler number of 1) is no surface the grid
-    resolves. The largest piece always stays.
+    lies: a bubble of the level set a voxel across, pinched off beside the data, is no
+    surface the grid resolves, and it would make a closed object two pieces and change its
+    Euler number. The largest piece always stays.
 
     Returns:
         The kept vertices (in their order) and faces (renumbered).

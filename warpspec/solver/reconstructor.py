@@ -447,7 +447,8 @@ class Reconstructor:
         anchors = np.vstack([hits[np.all(np.isfinite(hits), axis=1)],
                              self.scene.points.reshape(-1, 3)])
         vertices, faces = supported_components(vertices, faces, anchors,
-                                               radius=SUPPORT_RADIUS * self.grid.spacing)
+                                               radius=SUPPORT_RADIUS * self.grid.spacing,
+                                               min_extent=SPECK_VOXELS * self.grid.spacing)
         if crop and is_open(faces) and self._wraps_around(self._hit_normals(hits)[1]):
             # round the axis of the kept rays' normals (a false highlight's is not the
             # surface's), or, where they fix none, in the hulls of the anchors
@@ -481,6 +482,9 @@ WRAP_GAP_DEG = 90.0
 """An open surface whose normals turn by more than TURN_DEG is cropped only when they also
 leave an arc this wide empty around it (a patch wrapping past 180 degrees, not a tube seen all
 around)."""
+SPECK_VOXELS = 2.0
+"""Pieces of the mesh whose bounding box is less than this many voxels across (its
+diagonal) are specks of the level set, not surfaces the grid resolves: they are dropped."""
 UNWRAPPED_MARGIN = 2.0
 """Margin, in voxel widths, of the crop of an open surface bending round, in its own
 coordinates round the axis (:func:`warpspec.geometry.crop_to_unwrapped_hull`). On the wrap
