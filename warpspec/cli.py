@@ -691,7 +691,8 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--crop", default="auto", choices=["auto", "none", "hull", "support"],
                      help="auto (default): crop an open surface that bends round (its "
                           "normals turn past 120 degrees) to where the data reaches (the "
-                          "hull of the rays' hits and the points), keep others whole; none: "
+                          "hull of the rays' hits and the points, unwrapped round the "
+                          "surface's axis), keep others whole; none: "
                           "the whole "
                           "zero set; hull: the faces inside the hull of the constraints; "
                           "support: the faces "
