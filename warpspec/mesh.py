@@ -280,7 +280,7 @@ def supported_components(vertices: np.ndarray, faces: np.ndarray, anchors: np.nd
     piece whose bounding box has a diagonal shorter than ``min_extent`` is dropped wherever it
     lies: a bubble of the level set a voxel across, pinched off beside the data, is no
     surface the grid resolves, and it would make a closed object two pieces and change its
-    Euler number. The largest piece always stays.
+    Euler number. The largest piece is never dropped for its size.
 
     Returns:
         The kept vertices (in their order) and faces (renumbered).
