@@ -13,6 +13,7 @@ from warpspec.kernels import implicit as K
 from warpspec.mesh import is_open, supported_components, triangulate
 from warpspec.solver import initial_plane
 from warpspec.synthetic import make_scene
+from warpspec.synthetic.surfaces import Cylinder
 
 
 def _field(values: np.ndarray, device: str) -> wp.array:
@@ -358,15 +359,11 @@ def test_open_surface_is_cropped_to_the_hull_of_the_data():
     assert len(kept_f) < len(f) / 3
 
 
-def _cylinder_mesh(radius, sections=180, rows=41):
-    """A whole cylinder of axis (0, 0, 1) through (0.3, -0.2), heights -1..1: a quad grid."""
-    a, z = np.meshgrid(np.linspace(0.0, 2.0 * np.pi, sections, endpoint=False),
-                       np.linspace(-1.0, 1.0, rows), indexing="ij")
-    v = np.stack([0.3 + radius * np.cos(a), -0.2 + radius * np.sin(a), z], -1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(sections), np.arange(rows - 1), indexing="ij")
-    p, q = i * rows + j, ((i + 1) % sections) * rows + j
-    f = np.concatenate([np.stack([p, q, q + 1], -1), np.stack([p, q + 1, p + 1], -1)])
-    return v, f.reshape(-1, 3)
+def _cylinder_mesh(radius):
+    """A whole cylinder of axis (0, 0, 1) through (0.3, -0.2), heights -1..1, angle 0 on x."""
+    mesh = Cylinder([0.3, -0.2, 0.0], [0.0, 0.0, 1.0], radius, reference=[1.0, 0.0, 0.0],
+                    extent=(-1.0, 1.0)).mesh(sections=180)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
 def test_a_patch_bending_round_is_cropped_along_itself_not_by_chords():
