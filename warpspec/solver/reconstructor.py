@@ -379,15 +379,15 @@ class Reconstructor:
         if callback is not None:
             callback(m)
 
-    def _hit_normals(self, hits: np.ndarray, *, kept: bool = False
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """The finite hits and the scene's normals there (``kept``: of the rays not rejected)."""
+    def _hit_normals(self, hits: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The finite hits, the scene's normals there, and which of them the fit kept."""
         ok = np.all(np.isfinite(hits), axis=1)
-        if kept and self.fit_report is not None:
-            ok[self.fit_report.rejected] = False
+        kept = np.ones(len(hits), dtype=bool)
+        if self.fit_report is not None:
+            kept[self.fit_report.rejected] = False
         origins, dirs = self.scene.rays()
         normals = self.scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
-        return hits[ok], normals
+        return hits[ok], normals, kept[ok]
 
     def _wraps_around(self, normals: np.ndarray) -> bool:
         """Whether the normals at the hits turn by more than :data:`TURN_DEG`.
@@ -412,6 +412,22 @@ class Reconstructor:
         angles = np.sort(np.arctan2(normals @ vt[1], normals @ vt[0]))
         gaps = np.diff(np.concatenate([angles, angles[:1] + 2.0 * np.pi]))
         return bool(np.degrees(gaps.max()) > WRAP_GAP_DEG)
+
+    def _crop_round(self, vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray,
+                    hits: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Crop a surface bending round to the data.
+
+        Round the axis of the kept rays' normals (a false highlight's is not the surface's),
+        or, where they fix none, in the hulls of the anchors.
+        """
+        cropped = crop_to_unwrapped_hull(vertices, faces, anchors, hits, normals,
+                                         margin=UNWRAPPED_MARGIN * self.grid.spacing)
+        if cropped is not None:
+            return cropped
+        # a fixed share of the domain, so that the crop does not depend on the resolution
+        margin = CROP_MARGIN * float(np.max(self.grid.upper - self.grid.origin))
+        margin = max(margin, SUPPORT_RADIUS * self.grid.spacing)
+        return crop_to_data_hull(vertices, faces, anchors, margin=margin)
 
     @property
     def default_iterations(self) -> int:
@@ -449,19 +465,11 @@ class Reconstructor:
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing,
                                                min_extent=SPECK_VOXELS * self.grid.spacing)
-        if crop and is_open(faces) and self._wraps_around(self._hit_normals(hits)[1]):
-            # round the axis of the kept rays' normals (a false highlight's is not the
-            # surface's), or, where they fix none, in the hulls of the anchors
-            unwrapped = crop_to_unwrapped_hull(vertices, faces, anchors,
-                                               *self._hit_normals(hits, kept=True),
-                                               margin=UNWRAPPED_MARGIN * self.grid.spacing)
-            if unwrapped is None:
-                # a fixed share of the domain, so that the crop does not depend on the
-                # resolution
-                margin = CROP_MARGIN * float(np.max(self.grid.upper - self.grid.origin))
-                margin = max(margin, SUPPORT_RADIUS * self.grid.spacing)
-                unwrapped = crop_to_data_hull(vertices, faces, anchors, margin=margin)
-            vertices, faces = unwrapped
+        if crop and is_open(faces):
+            hit_points, normals, kept = self._hit_normals(hits)
+            if self._wraps_around(normals):
+                vertices, faces = self._crop_round(vertices, faces, anchors, hit_points[kept],
+                                                   normals[kept])
         rejected = ([] if self.fit_report is None
                     else rejected_summary(self.fit_report, self.scene))
         result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
