@@ -236,6 +236,46 @@ def test_two_points_at_one_height_ask_no_slope():
     assert np.abs(surface.value(pair)).max() < 0.1 * voxel
 
 
+@pytest.mark.parametrize("seed", [0, 7])
+def test_under_lamps_two_points_at_one_height_ask_no_slope(seed):
+    """Under lamps the points weigh far more than by flash, so two points a thousandth apart
+    along the axis whose radii differ by a tenth of a voxel (an axis a quarter of a degree off
+    puts them so) ask a slope that a third-order profile carries on as a wave over the body:
+    their heights and radii are averaged. The body stays within half a voxel of the truth, the
+    pair within a tenth."""
+    synthetic = make_scene("bottle-lamps", seed=seed)
+    truth = synthetic.surface
+    voxel = 0.02
+    pair = np.stack([truth.at(0.3, -0.3), truth.at(2.0, -0.301)])
+    radial = pair[1] - truth.base - (pair[1] - truth.base) @ truth.axis * truth.axis
+    pair[1] += 0.1 * voxel * radial / np.linalg.norm(radial)
+    scene = synthetic.scene()
+    origins, dirs = scene.rays()
+    lo, hi = scene.domain
+    surface = R.fit_revolution_lit(origins, dirs, scene.normals(synthetic.truth_points),
+                                   np.concatenate([scene.points, pair]), lo=lo, hi=hi,
+                                   voxel=voxel, axis=(truth.base, truth.axis), tilted=False)
+    assert surface is not None
+    body = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(-0.42, 0.1, 27)[None, :])
+    assert np.abs(surface.value(body.reshape(-1, 3))).max() < 0.5 * voxel
+    assert np.abs(surface.value(pair)).max() < 0.1 * voxel
+
+
+def test_point_rows_average_only_points_within_half_a_voxel_of_height():
+    """A lone point keeps its height and radius; points on a straight profile within half a
+    voxel of each other's height are averaged onto it exactly."""
+    voxel = 0.1
+    h = np.array([0.0, 0.03, 0.06, 1.0, 3.0])
+    r = 0.5 + 2.0 * h  # a cone: straight
+    r[3] += 0.3  # off the cone, alone in its window
+    heights, radii, weights = R._point_rows(h, r, 7.0, voxel)
+    np.testing.assert_allclose(radii[:3], 0.5 + 2.0 * heights[:3], atol=1e-12)
+    np.testing.assert_allclose(heights[:3], [0.015, 0.03, 0.045], atol=1e-12)
+    assert heights[3] == 1.0 and radii[3] == r[3]
+    assert heights[4] == 3.0 and radii[4] == r[4]
+    np.testing.assert_array_equal(weights, 7.0)
+
+
 def test_beyond_its_data_the_profile_keeps_its_radius():
     """Without the point on the neck the profile's last datum is the neck's highlights, where
     the shoulder still slopes: the neck above keeps the radius found there (2.6-2.9 voxels
