@@ -216,6 +216,23 @@ def test_the_shoulder_keeps_the_curvature_its_highlights_show():
     assert np.mean(errors) < 0.6
 
 
+def _pair_at_one_height(truth, apart: float) -> np.ndarray:
+    """Two points of the bottle's body a thousandth apart along its axis, the second moved
+    ``apart`` outward."""
+    pair = np.stack([truth.at(0.3, -0.3), truth.at(2.0, -0.301)])
+    radial = pair[1] - truth.base - (pair[1] - truth.base) @ truth.axis * truth.axis
+    pair[1] += apart * radial / np.linalg.norm(radial)
+    return pair
+
+
+def _assert_body_unbent(surface, truth, pair: np.ndarray, voxel: float) -> None:
+    """The profile within half a voxel of the truth over the body, the pair within a tenth."""
+    assert surface is not None
+    body = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(-0.42, 0.1, 27)[None, :])
+    assert np.abs(surface.value(body.reshape(-1, 3))).max() < 0.5 * voxel
+    assert np.abs(surface.value(pair)).max() < 0.1 * voxel
+
+
 def test_two_points_at_one_height_ask_no_slope():
     """Two points a thousandth apart along the axis whose radii differ by 0.03 voxel (as an
     axis a tenth of a degree off leaves them) must not bend the body: the profile stays within
@@ -223,17 +240,13 @@ def test_two_points_at_one_height_ask_no_slope():
     synthetic = make_scene("bottle", seed=0)
     truth = synthetic.surface
     voxel = 0.02
-    pair = np.stack([truth.at(0.3, -0.3), truth.at(2.0, -0.301)])
-    radial = pair[1] - truth.base - (pair[1] - truth.base) @ truth.axis * truth.axis
-    pair[1] += 0.03 * voxel * radial / np.linalg.norm(radial)
+    pair = _pair_at_one_height(truth, 0.03 * voxel)
     scene = synthetic.scene()
     origins, dirs = scene.rays()
     lo, hi = scene.domain
     surface, _ = fit_revolution(origins, dirs, np.concatenate([scene.points, pair]), lo=lo,
                                 hi=hi, voxel=voxel)
-    body = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(-0.42, 0.1, 27)[None, :])
-    assert np.abs(surface.value(body.reshape(-1, 3))).max() < 0.5 * voxel
-    assert np.abs(surface.value(pair)).max() < 0.1 * voxel
+    _assert_body_unbent(surface, truth, pair, voxel)
 
 
 @pytest.mark.parametrize("seed", [0, 7])
@@ -246,19 +259,14 @@ def test_under_lamps_two_points_at_one_height_ask_no_slope(seed):
     synthetic = make_scene("bottle-lamps", seed=seed)
     truth = synthetic.surface
     voxel = 0.02
-    pair = np.stack([truth.at(0.3, -0.3), truth.at(2.0, -0.301)])
-    radial = pair[1] - truth.base - (pair[1] - truth.base) @ truth.axis * truth.axis
-    pair[1] += 0.1 * voxel * radial / np.linalg.norm(radial)
+    pair = _pair_at_one_height(truth, 0.1 * voxel)
     scene = synthetic.scene()
     origins, dirs = scene.rays()
     lo, hi = scene.domain
     surface = R.fit_revolution_lit(origins, dirs, scene.normals(synthetic.truth_points),
                                    np.concatenate([scene.points, pair]), lo=lo, hi=hi,
                                    voxel=voxel, axis=(truth.base, truth.axis), tilted=False)
-    assert surface is not None
-    body = truth.at(np.linspace(0.0, 6.0, 12)[:, None], np.linspace(-0.42, 0.1, 27)[None, :])
-    assert np.abs(surface.value(body.reshape(-1, 3))).max() < 0.5 * voxel
-    assert np.abs(surface.value(pair)).max() < 0.1 * voxel
+    _assert_body_unbent(surface, truth, pair, voxel)
 
 
 def test_point_rows_average_only_points_within_half_a_voxel_of_height():
