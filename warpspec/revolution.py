@@ -523,8 +523,10 @@ def _lit_profile(c: np.ndarray, a: np.ndarray, heights: np.ndarray, hits: np.nda
     hh, hr, e = frame.split(hits)
     ph, pr, _ = frame.split(pts)
     sw = np.sqrt(weights)
-    ph, pr, pw = _point_rows(ph, pr, POINT_WEIGHT / voxel, voxel if average else 0.0)
-    values = (np.r_[ph, hh], np.r_[pr, hr], np.r_[pw, sw / voxel])
+    if average:
+        ph, pr, _ = _point_rows(ph, pr, POINT_WEIGHT / voxel, voxel)
+    values = (np.r_[ph, hh], np.r_[pr, hr],
+              np.r_[np.full(len(ph), POINT_WEIGHT / voxel), sw / voxel])
     slopes = (hh, nrm @ a, np.einsum("ij,ij->i", nrm, e), sw)
     return _solve_profile(heights, scale=scale, smoothness=smoothness, values=values,
                           slopes=slopes)
