@@ -3,7 +3,8 @@
 For each synthetic scene of the shape classes (seed 0) and the paper's octant, at one grid
 (default 64) with the default options: the set-up's stages as the implicit start announces
 them (the quadric; the ring torus and the surface of revolution, tried when the cameras stand
-all around; the robust passes on the coarse grids; the ladder of grid fits, and the ladder
+all around; the robust passes on the coarse grids; the cross-validation passes on the
+coarsest; the ladder of grid fits, and the ladder
 again when rejected highlights come back), the rest of the set-up (redistance, the band, the
 device arrays), the flow's iterations (as many as the grid's schedule gives) and the meshing.
 Seconds, medians of ``--repeats`` runs in one process, after one untimed run that loads the
@@ -25,14 +26,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 SCENES = ("octant", "sphere-around", "ellipsoid-around", "torus", "torus-lamps", "bottle",
           "bottle-lamps", "wrap", "freeform", "point-light")
-STAGES = ("quadric", "torus", "revolution", "robust passes", "grid fit", "grid fit again",
-          "other set-up", "iterations", "meshing", "total")
+STAGES = ("quadric", "torus", "revolution", "robust passes", "cross-validation", "grid fit",
+          "grid fit again", "other set-up", "iterations", "meshing", "total")
 
 
 def _stage(text: str) -> str:
     for prefix, name in (("a quadric", "quadric"), ("a ring torus", "torus"),
                          ("a surface of revolution", "revolution"),
-                         ("robust pass", "robust passes"), ("grid ", "grid fit"),
+                         ("robust pass", "robust passes"),
+                         ("cross-validation pass", "cross-validation"), ("grid ", "grid fit"),
                          ("the ladder again", "grid fit again"),
                          ("the start redistanced", "other set-up")):
         if text.startswith(prefix):
