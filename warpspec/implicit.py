@@ -180,6 +180,11 @@ SURROUND_STEPS = 1000
 """Perceptron steps :func:`surrounds` takes before it solves its linear program."""
 
 
+def _rejection_limit(misses: np.ndarray, *, floor: float) -> float:
+    """REJECT_SIGMAS robust standard deviations of ``misses`` (degrees), at least ``floor``."""
+    return max(REJECT_SIGMAS * 1.4826 * float(np.median(misses)), floor)
+
+
 def level_ladder(resolution: int) -> list[int]:
     """Resolutions of the coarse-to-fine ladder: 16, 32, ... below ``resolution``, then it."""
     levels = []
@@ -679,7 +684,7 @@ class ImplicitStart:
             previous = self._trial_return(previous, ladder, rounds, cg)
             # Then cross-validation, on every ray kept (the true ones back): a coarse fit
             # without each fold of them, and the rays those fits miss are rejected; the ladder
-            # is refitted from the fit so far, and the rays that meets come back (once). Only
+            # is refitted from the fit so far, and the rays the new fit meets come back (once). Only
             # from a fit that meets the kept normals within noise (as for the trial): the lost
             # bottle's blob under lamps, refitted without the rays it misses, looked supported
             if self._kept_median(previous) <= TRIAL_DEG and self._cross_validate(
@@ -838,8 +843,7 @@ class ImplicitStart:
             met = ~base & (miss < 180.0)
             if not met.any():
                 break
-            limit = max(RETURN_DEG, REJECT_SIGMAS * 1.4826 * float(np.median(miss[met])))
-            over = met & (miss > limit)
+            over = met & (miss > _rejection_limit(miss[met], floor=RETURN_DEG))
             most = math.ceil(CV_SHARE * int(met.sum()))
             if int(over.sum()) > most:
                 worst = np.argsort(np.where(over, -miss, np.inf), kind="stable")[:most]
@@ -878,8 +882,7 @@ class ImplicitStart:
         live = (self.kind.numpy() != K.ANCHOR_NONE) & ~self.excluded
         if not live.any():
             return math.inf
-        sigma = 1.4826 * float(np.median(self.residual[live]))
-        return max(REJECT_SIGMAS * sigma, REJECT_DEG)
+        return _rejection_limit(self.residual[live], floor=REJECT_DEG)
 
     def _quadric_suffices(self, inside: np.ndarray) -> bool:
         """Whether the quadric is the shape (``inside``: the rays that enter the domain).
