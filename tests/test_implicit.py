@@ -324,14 +324,18 @@ def test_true_highlights_a_stiff_pass_misses_all_come_back(seed):
 def test_false_highlights_a_supple_fit_follows_are_rejected_by_cross_validation(seed):
     """On the free-form patch with 6 of 60 highlights false, the fit bends to most false
     normals, and the robust passes reject only 2 of them on these seeds (at 32 cells). Left
-    out a tenth at a time, the false ones are missed by the fits made without them far more
-    than the true ones: at least 5 are rejected, and no true one."""
+    out one at a time, the false ones are missed by the fits made without them far more than
+    the true ones: at least 4 are rejected, and no true one. (Two of seed 4's are hits at
+    corners of the hits' hull, where a fit without them extrapolates and only a miss past
+    30 degrees counts. Ten folds and a limit of 3 robust standard deviations rejected 5 on
+    each seed here, but 1-4 of 15 with a quarter false at 64 cells, seeds 3, 5, 7, 12, where
+    the leave-one-out passes reject 6-11.)"""
     synthetic = make_scene("freeform", seed=seed, outliers=0.1)
     result = ws.reconstruct(synthetic.scene(), resolution=32, iterations=20, device="cpu")
     rejected = {r["index"] for r in result.rejected}
     false = set(np.flatnonzero(synthetic.outlier_mask).tolist())
     assert rejected <= false
-    assert len(rejected) >= 5
+    assert len(rejected) >= 4
 
 
 @pytest.mark.parametrize("seed", [6, 10])
@@ -519,7 +523,7 @@ def test_the_set_up_reports_its_stages():
                      progress=said.append)
     assert said[0].startswith("a quadric fitted to 60 rays and 5 points")
     assert "grid 16 of 16, 32" in said and "grid 32 of 16, 32" in said
-    assert "cross-validation pass 1 of 3 (10 folds, grid 16)" in said
+    assert "cross-validation pass 1 of 8 (60 folds, grid 16)" in said
 
 
 def test_fill_pockets_removes_sealed_regions_and_keeps_the_sheet(device):
