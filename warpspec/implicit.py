@@ -101,7 +101,7 @@ surface meets; out of sample, a false one is missed by what it disagrees with it
 On the free-form patch (60 highlights) at 64 cells, seeds 3, 5, 7 and 12: with 6 false, 10
 folds and a limit of 3 robust standard deviations kept 2-4 false highlights on seeds 3 and 12,
 these passes none (the error 0.14 and 0.18 h, as the clean scenes' 0.13 and 0.18); with 15
-false, 1-4 were rejected and the surface was 0.63-0.78 h off, now 6-11 and 0.23-0.43 h (the
+false, 1-4 were rejected and the surface was 0.63-0.78 h off, now 6-11 and 0.23-0.46 h (the
 false ones removed by hand: 0.16 h on seed 12). Leaving out a tenth at a time removes the
 neighbours that would tell a true feature apart, and the robust spread of misses made with a
 quarter false grows with them."""
