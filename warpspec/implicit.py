@@ -186,11 +186,6 @@ SURROUND_STEPS = 1000
 """Perceptron steps :func:`surrounds` takes before it solves its linear program."""
 
 
-def _rejection_limit(misses: np.ndarray, *, floor: float) -> float:
-    """REJECT_SIGMAS robust standard deviations of ``misses`` (degrees), at least ``floor``."""
-    return max(REJECT_SIGMAS * 1.4826 * float(np.median(misses)), floor)
-
-
 def level_ladder(resolution: int) -> list[int]:
     """Resolutions of the coarse-to-fine ladder: 16, 32, ... below ``resolution``, then it."""
     levels = []
@@ -843,8 +838,7 @@ class ImplicitStart:
             self._say(f"cross-validation pass {index + 1} of {CV_PASSES} ({folds} folds, "
                       f"grid {resolution})")
             reference = self._ladder([resolution], [], [], quiet=True, start=reference)
-            self._anchor(reference)
-            self._update_weights(reference)
+            self._anchor(reference)  # the hits the hull is taken of
             inner = ~self._on_hull(kept)
             order = np.random.default_rng(index).permutation(kept)
             miss = np.full(self.m, 180.0)
@@ -915,7 +909,8 @@ class ImplicitStart:
         live = (self.kind.numpy() != K.ANCHOR_NONE) & ~self.excluded
         if not live.any():
             return math.inf
-        return _rejection_limit(self.residual[live], floor=REJECT_DEG)
+        sigma = 1.4826 * float(np.median(self.residual[live]))
+        return max(REJECT_SIGMAS * sigma, REJECT_DEG)
 
     def _quadric_suffices(self, inside: np.ndarray) -> bool:
         """Whether the quadric is the shape (``inside``: the rays that enter the domain).
