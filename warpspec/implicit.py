@@ -581,6 +581,7 @@ class ImplicitStart:
         codes, vectors = scene.ray_lights()
         self._rays = (origins, dirs, codes, vectors)
         self._level_rays = None
+        self._rays_level: _Level | None = None  # the level _level_rays are in the voxels of
         self.torus: T.Torus | None = None
         """The ring torus taken as the start, when one was."""
         self.revolution: R.SurfaceOfRevolution | None = None
@@ -1176,6 +1177,7 @@ class ImplicitStart:
 
     def _use_level_rays(self, level: _Level) -> None:
         """The rays in the level's voxels (origins, and point lights' positions)."""
+        self._rays_level = level
         origins, dirs, codes, vectors = self._rays
         vectors = np.where((codes == LIGHT_POINT)[:, None], level.to_grid(vectors), vectors)
         d, f32 = self.device, np.float32
@@ -1186,8 +1188,15 @@ class ImplicitStart:
             wp.array(vectors.astype(f32), dtype=wp.vec3, device=d))
 
     def _anchor(self, level: _Level) -> None:
+        """Each ray's anchor on ``level``'s zero set, its kind and the normal asked there.
+
+        The rays are taken in ``level``'s voxels: a fit of another level (a cross-validation
+        fold on the coarsest grid) may have been made since ``level`` was.
+        """
         if self.m == 0:
             return
+        if self._rays_level is not level:
+            self._use_level_rays(level)
         wp.launch(K.ray_anchor, dim=self.m,
                   inputs=[level.f, level.origin, level.h, *self._level_rays],
                   outputs=[self.anchor, self.kind, self.normals], device=self.device)
