@@ -10,6 +10,7 @@ import trimesh
 
 from warpspec.errors import SceneError
 from warpspec.synthetic import (
+    Blob,
     CameraLight,
     Cylinder,
     DirectionalLight,
@@ -36,9 +37,9 @@ from warpspec.synthetic import (
     scene_names,
 )
 
-SHAPES = ["sphere-around", "ellipsoid-around", "torus", "torus-lamps", "bottle", "bottle-lamps",
-          "wrap", "freeform", "point-light"]
-CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "torus": 0, "torus-lamps": 0}
+SHAPES = ["sphere-around", "ellipsoid-around", "torus", "torus-lamps", "blob", "bottle",
+          "bottle-lamps", "wrap", "freeform", "point-light"]
+CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "torus": 0, "torus-lamps": 0, "blob": 2}
 
 NAMES = scene_names()
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
@@ -342,7 +343,8 @@ def test_analytic_closest_points():
                                      region=(-0.5, 0.5, -0.5, 0.5)),
                  Ellipsoid((0.1, 0.0, 0.0), (1.0, 0.7, 0.5)), Saddle((0.0, 0.0, 0.0), 0.4),
                  Paraboloid((0.0, 0.0, 0.2), -0.6, -0.4), Sphere((0, 0, 0), 0.7),
-                 Cylinder((0, 0, 0), (1, 1, 0), 0.3), Plane((0, 0, 0.1), (1, 2, 3))):
+                 Cylinder((0, 0, 0), (1, 1, 0), 0.3), Plane((0, 0, 0.1), (1, 2, 3)),
+                 Blob((0, 0.1, 0), 0.6, [(0.3, (1, 1, 0), 0.5), (0.2, (0, 0, -1), 0.6)])):
         cp = surf.closest_point(q)
         assert np.abs(surf.implicit(cp)).max() < 1e-12
         # The offset from the closest point is along the normal.
@@ -571,3 +573,42 @@ def test_truth_json_states_the_truth_meshs_topology(scenes, name):
     mesh.merge_vertices()
     d = s.truth_dict()
     assert d["closed"] == mesh.is_watertight and d["euler"] == mesh.euler_number
+
+
+def test_blob_normal_intersection_closest_point_and_chart():
+    blob = Blob((0.1, -0.05, 0.0), 0.9, [(0.25, (1, 0, 0), 0.5), (0.2, (0, 1, 1), 0.6)])
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(200, 3))
+    # the normal is the unit gradient of the implicit function (central differences)
+    eps = 1e-6
+    grad = np.stack([(blob.implicit(x + eps * e) - blob.implicit(x - eps * e)) / (2 * eps)
+                     for e in np.eye(3)], axis=1)
+    np.testing.assert_allclose(blob.normal(x), grad / np.linalg.norm(grad, axis=1)[:, None],
+                               atol=1e-7)
+    # the top of the first bump: 0.9 * (1.25 + 0.2 exp(-1 / 0.36)) from the centre
+    top = 0.9 * (1.25 + 0.2 * math.exp(-1.0 / 0.36))
+    t = blob.intersect(np.array([[3.0, -0.05, 0.0]]), np.array([[-1.0, 0.0, 0.0]]))
+    np.testing.assert_allclose(t, [2.9 - top], rtol=1e-12)
+    # rays from outside: each first hit is on the surface with the whole ray before it outside
+    origins = 3.0 * _unit_rows(rng.normal(size=(50, 3)))
+    dirs = _unit_rows(rng.normal(scale=0.3, size=(50, 3)) - origins)
+    t = blob.intersect(origins, dirs)
+    hit = np.isfinite(t)
+    assert 20 < hit.sum() < 50
+    assert np.abs(blob.implicit(origins[hit] + t[hit, None] * dirs[hit])).max() < 1e-12
+    s = np.linspace(0.0, 1.0, 4001)[None, :-1, None] * t[hit, None, None]
+    before = origins[hit, None, :] + s * dirs[hit, None, :]
+    assert blob.implicit(before.reshape(-1, 3)).min() > 0.0
+    # a missing ray passes outside: no sample along it is inside
+    far = origins[~hit, None, :] + np.linspace(0, 6, 4001)[None, :, None] * dirs[~hit, None, :]
+    assert blob.implicit(far.reshape(-1, 3)).min() > 0.0
+    # a chart lies on the surface, and the closest point is along the normal
+    chart = blob.chart(blob.at(np.array([[0.0, 0.6, 0.8]]))[0])
+    on = np.array([chart(uv) for uv in rng.uniform(-0.3, 0.3, (20, 2))])
+    assert np.abs(blob.implicit(on)).max() < 1e-12
+    with pytest.raises(SceneError, match="bumps"):
+        Blob((0, 0, 0), 1.0, [(0.2, (0, 0, 1), 0.0)])
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1)[:, None]

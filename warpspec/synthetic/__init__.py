@@ -23,7 +23,8 @@ Built-in scenes (:func:`make_scene`) reproduce the paper's experiments with look
 A second set covers every shape class, its geometry varied a little by ``seed`` (sizes, axis
 ratios, bump positions, camera jitter, which points are chosen): closed objects seen all
 around (``sphere-around``, ``ellipsoid-around`` with a lamp per camera, ``torus`` by flash and
-``torus-lamps`` with a lamp per camera), a ``bottle`` open at the domain's ends (by flash,
+``torus-lamps`` with a lamp per camera, and ``blob``, a sphere raised by bumps that no
+closed-form shape fits), a ``bottle`` open at the domain's ends (by flash,
 and ``bottle-lamps`` with a lamp per camera), a ``wrap`` patch spanning more than 180
 degrees, a ``freeform`` height field (``highlights`` chooses how many) and a ``point-light``
 dome. Their outliers are false highlights on the object (a pixel whose ray meets the truth where the
@@ -71,6 +72,7 @@ from .catalogue import (
 )
 from .scenes import SyntheticScene, corrupt_pixels, scene_from_path, scene_from_points
 from .surfaces import (
+    Blob,
     Cylinder,
     Ellipsoid,
     FreeformHeightField,
@@ -86,6 +88,7 @@ from .surfaces import (
 )
 
 __all__ = [
+    "Blob",
     "CameraLight",
     "Cylinder",
     "DOMAIN_MARGIN",

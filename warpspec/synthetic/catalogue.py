@@ -24,6 +24,7 @@ from ..geometry import (
 from .cameras import Halfspace, Intrinsics, clip_mesh, spread_points
 from .scenes import SyntheticScene, scene_from_path, scene_from_points
 from .surfaces import (
+    Blob,
     Cylinder,
     Ellipsoid,
     FreeformHeightField,
@@ -334,6 +335,30 @@ def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     )
 
 
+def blob(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+    """A closed free-form object (:class:`~.surfaces.Blob`) seen all around by flash cameras.
+
+    A sphere of radius 0.9-1.1 raised by three bumps of 0.15-0.3 radii, each about 0.45-0.65
+    radians wide, in random directions (by seed): no quadric, torus or surface of revolution.
+    40 cameras on jittered directions all around at 3.4 radii from the centre; each keeps up to
+    2 visible highlights. Six points; domain: the box grown by 12% of its largest side.
+    """
+    rng = _shape_rng(seed, "blob")
+    radius = float(rng.uniform(0.9, 1.1))
+    centre = rng.uniform(-0.1, 0.1, 3)
+    bumps = [(float(rng.uniform(0.15, 0.3)), _normalize(rng.standard_normal(3)),
+              float(rng.uniform(0.45, 0.65))) for _ in range(3)]
+    surf = Blob(centre, radius, bumps)
+    mesh = surf.mesh(subdivisions=5)
+    return scene_from_path(
+        surf, centre + 3.4 * radius * _around(40, rng), light=CameraLight(),
+        look_at_points=centre, points=_pick_points(mesh.vertices, surf, 6, rng),
+        domain=_margin_box(mesh.vertices), candidates=mesh.vertices, name="blob",
+        mesh_options={"subdivisions": 5}, noise=noise, outliers=outliers, seed=seed,
+        per_view=2, false_highlights="surface", closed=True, euler=2,
+    )
+
+
 def torus(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
     """A ring torus (tube about 0.35 of the major radius) seen all around by flash cameras.
 
@@ -580,6 +605,7 @@ SCENES: dict[str, Callable[..., SyntheticScene]] = {
     "ellipsoid-around": ellipsoid_around,
     "torus": torus,
     "torus-lamps": torus_lamps,
+    "blob": blob,
     "bottle": bottle,
     "bottle-lamps": bottle_lamps,
     "wrap": wrap,

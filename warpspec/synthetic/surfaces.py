@@ -190,6 +190,134 @@ class Sphere(Surface):
         return trimesh.Trimesh(vertices=m.vertices + self.centre, faces=m.faces, process=False)
 
 
+class Blob(Surface):
+    """A closed star-shaped blob: a sphere raised by smooth bumps.
+
+    The surface is ``|x - centre| = radius * (1 + sum_k a_k exp((u . d_k - 1) / w_k^2))`` with
+    ``u`` the unit direction from ``centre`` to ``x``: each bump ``(a_k, d_k, w_k)`` raises the
+    sphere by ``a_k`` radii around the direction ``d_k``, over an angle of about ``w_k``
+    radians. No quadric, torus or surface of revolution fits it: a closed free-form object.
+
+    Args:
+        centre: Centre ``(3,)``.
+        radius: Radius of the sphere under the bumps (> 0).
+        bumps: ``(height, direction, width)`` of each bump: height as a share of the radius
+            (>= 0), direction ``(3,)`` (any length), width in radians (> 0).
+    """
+
+    closed = True
+
+    def __init__(self, centre: Sequence[float], radius: float,
+                 bumps: Sequence[tuple[float, Sequence[float], float]]) -> None:
+        self.centre = _vec3(centre, "centre")
+        if not (np.isfinite(radius) and radius > 0):
+            raise SceneError(f"radius: must be a positive number, got {radius!r}")
+        self.radius = float(radius)
+        self.bumps = []
+        for k, (height, direction, width) in enumerate(bumps):
+            if not (np.isfinite(height) and height >= 0 and np.isfinite(width) and width > 0):
+                raise SceneError(f"bumps[{k}]: need height >= 0 and width > 0, got "
+                                 f"{height!r}, {width!r}")
+            self.bumps.append((float(height), _unit3(direction, f"bumps[{k}] direction"),
+                               float(width)))
+        self.largest = self.radius * (1.0 + sum(b[0] for b in self.bumps))
+        """Radius of a ball about ``centre`` that holds the blob."""
+
+    def _split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        y = _points(x) - self.centre
+        rho = np.linalg.norm(y, axis=1)
+        u = np.where(rho[:, None] > 0, y / np.where(rho > 0, rho, 1.0)[:, None], [0.0, 0.0, 1.0])
+        return rho, u
+
+    def height(self, u: np.ndarray) -> np.ndarray:
+        """The surface's distance from the centre along unit directions ``u`` ``(N, 3)``."""
+        out = np.ones(len(u))
+        for a, d, w in self.bumps:
+            out += a * np.exp((u @ d - 1.0) / w**2)
+        return self.radius * out
+
+    def _height_gradient(self, u: np.ndarray) -> np.ndarray:
+        """Gradient of :meth:`height`'s formula in ``u`` (not yet projected on the sphere)."""
+        g = np.zeros_like(u)
+        for a, d, w in self.bumps:
+            g += (a * np.exp((u @ d - 1.0) / w**2) / w**2)[:, None] * d
+        return self.radius * g
+
+    def at(self, u: np.ndarray) -> np.ndarray:
+        """Surface points along unit directions ``u`` from the centre ``(N, 3)``."""
+        u = _points(u)
+        return self.centre + self.height(u)[:, None] * u
+
+    def implicit(self, x: np.ndarray) -> np.ndarray:
+        """``|x - centre| - height(u)``: the sign of the distance, not the distance itself."""
+        rho, u = self._split(x)
+        return rho - self.height(u)
+
+    def _gradient(self, x: np.ndarray) -> np.ndarray:
+        rho, u = self._split(x)
+        g = self._height_gradient(u)
+        tangent = g - _dot(g, u)[:, None] * u
+        return u - tangent / np.maximum(rho, 1e-300)[:, None]
+
+    def normal(self, x: np.ndarray) -> np.ndarray:
+        """Unit gradient of :meth:`implicit`: the surface normal at surface points."""
+        return _normalize(self._gradient(x))
+
+    def closest_point(self, x: np.ndarray) -> np.ndarray:
+        """Closest points: the radial projection, then steps along the surface.
+
+        Each step moves along the tangent part of ``x - p`` and back onto the surface along
+        the radius, until ``x - p`` is normal to it.
+        """
+        x = _points(x)
+        _, u = self._split(x)
+        p = self.at(u)
+        for _ in range(500):
+            n = self.normal(p)
+            d = x - p
+            tangent = d - _dot(d, n)[:, None] * n
+            # a far point's tangent offset is larger than the arc to walk by about the ratio
+            # of its distance from the centre to the surface's (exactly so on a sphere)
+            rho = np.linalg.norm(p - self.centre, axis=1)
+            step = rho / (rho + np.linalg.norm(d, axis=1))
+            p = self.at(self._split(p + step[:, None] * tangent)[1])
+            if float(np.max(np.linalg.norm(tangent, axis=1), initial=0.0)) < 1e-13 * self.largest:
+                break
+        return p
+
+    def chart(self, x0: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Chart by direction around ``x0``: smooth and exactly on the surface."""
+        _, u0 = self._split(np.asarray(x0, dtype=np.float64).reshape(1, 3))
+        t1, t2 = _tangent_basis(u0[0])
+
+        def point(uv: np.ndarray) -> np.ndarray:
+            return self.at(_normalize((u0[0] + uv[0] * t1 + uv[1] * t2)[None]))[0]
+
+        return point
+
+    def intersect(  # noqa: D102
+        self, origins: np.ndarray, directions: np.ndarray, *, t_min: float = 1e-9
+    ) -> np.ndarray:
+        o, d = _points(origins), _points(directions)
+        # only the ball of radius ``largest`` can hold a crossing
+        oc = o - self.centre
+        a, b = _dot(d, d), 2 * _dot(d, oc)
+        c = _dot(oc, oc) - (self.largest * (1 + 1e-6)) ** 2
+        disc = b * b - 4 * a * c
+        root = np.sqrt(np.where(disc >= 0, disc, 0.0))
+        t0 = np.where(disc >= 0, (-b - root) / (2 * a), np.inf)
+        t1 = np.where(disc >= 0, (-b + root) / (2 * a), -np.inf)
+        norm = np.linalg.norm(d, axis=1).max(initial=1.0)
+        return _march(self.implicit, o, d, np.maximum(t0, t_min), t1,
+                      step=0.002 * self.radius / norm)
+
+    def mesh(self, *, subdivisions: int = 5) -> trimesh.Trimesh:
+        """The icosphere of ``subdivisions`` levels (5: 20480 triangles) moved onto the blob."""
+        m = trimesh.creation.icosphere(subdivisions=subdivisions)
+        return trimesh.Trimesh(vertices=self.at(np.asarray(m.vertices)), faces=m.faces,
+                               process=False)
+
+
 class Ellipsoid(Surface):
     """An axis-aligned ellipsoid ``sum(((x - centre) / radii)^2) = 1``.
 
