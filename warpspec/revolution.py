@@ -28,6 +28,8 @@ it does, as it would take a quadric.
 
 from __future__ import annotations
 
+import functools
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -190,6 +192,30 @@ def _refine_axis(c: np.ndarray, a: np.ndarray, p: np.ndarray, n: np.ndarray,
     return unpack(fit.x)
 
 
+def _finite_or_none(fit: Callable) -> Callable:
+    """A fit run with numerical warnings silenced; a shape with a profile not finite: ``None``.
+
+    Asked of data that no surface of revolution explains (a blob seen all around), the
+    profile's slopes can grow without bound and its banded system turn singular: that shape
+    is no answer, and the warnings are no news to a user.
+    """
+    @functools.wraps(fit)
+    def quiet(*args, **kwargs):
+        from scipy.sparse.linalg import MatrixRankWarning
+
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
+                warnings.catch_warnings():
+            warnings.simplefilter("ignore", MatrixRankWarning)
+            out = fit(*args, **kwargs)
+        shape = out[0] if isinstance(out, tuple) else out
+        if shape is not None and not np.all(np.isfinite(shape.radii)):
+            return (None, *out[1:]) if isinstance(out, tuple) else None
+        return out
+
+    return quiet
+
+
+@_finite_or_none
 def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
                    lo: np.ndarray, hi: np.ndarray, voxel: float
                    ) -> tuple[SurfaceOfRevolution | None, np.ndarray]:
@@ -415,6 +441,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
     return _flat_ends(heights, radii, np.r_[ph, hh[met & (weights > 0.0)]])
 
 
+@_finite_or_none
 def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
                        points: np.ndarray, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
                        axis: tuple[np.ndarray, np.ndarray], tilted: bool = True
