@@ -645,16 +645,16 @@ class ImplicitStart:
             shape = "revolution"
             self._revolution_field(revolution, out)
         else:
-            if self._best is not None and self._best[0] > float(
-                    np.mean(self.residual <= QUADRIC_DEG)):
-                # a torus or a surface of revolution that meets more normals than the quadric
-                # (shares of every ray, 180 degrees off where a ray misses the shape) but not
-                # enough to be the start is a better prior for the grid fit; it is a closed
-                # object or a tube, so only its cavities are sealed pockets
-                self.prior = self._best[1]
-                self._one_side = False
-                self._say(f"the grid fit about the {_PRIOR_NAMES[type(self.prior)]}")
-            elif guess.kind == "plane" and max(
+            # a torus or a surface of revolution that meets more normals than the quadric
+            # (shares of every ray, 180 degrees off where a ray misses the shape) but not
+            # enough to be the start may be a better prior for the grid fit; it is a closed
+            # object or a tube, so only its cavities are sealed pockets. Whether it is better
+            # is decided by the fits themselves (:meth:`_fit_score`): a closed blob seen all
+            # around is met by a tube through two of its bumps more often than by the quadric,
+            # but the grid fit about the tube stays open at its ends
+            shaped = self._best is not None and self._best[0] > float(
+                np.mean(self.residual <= QUADRIC_DEG))
+            if guess.kind == "plane" and max(
                     self.quadric.sheets_crossed(*self.scene.rays(), lo, hi),
                     self.quadric.sheets_crossed(*columns(guess.normal, lo, hi), lo, hi)) > 1:
                 # seen from one side, a surface is crossed once by each ray, and once by each
@@ -666,50 +666,87 @@ class ImplicitStart:
                     self.scene, initial, lo=lo, hi=hi, voxel=self.grid.spacing,
                     frame=plane_frame(guess.normal))
             ladder = level_ladder(max(self.grid.shape) - 1)
-            # Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
-            # normals it misses by far more than the others'; a stiff fit cannot bend to a
-            # false normal, and a supple one no longer feels those already gone. Then the
-            # whole ladder without them, and the rejected rays whose normals that fit meets
-            # after all (a stiff pass also misses a sharp but true bend) come back, with the
-            # ladder refitted from that fit (from the prior, a grazing ray back would be met
-            # where it first crossed the prior again, far before its true hit)
-            self.excluded = np.zeros(self.m, dtype=bool)
-            coarse = [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
-            for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
-                self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
-                          f"(grids {', '.join(map(str, coarse))})")
-                self._ladder(coarse, [], [], smoothness=smoothness, third=0.0,
-                             quiet=True)
-                self.excluded |= self._outliers()
-            previous = self._ladder(ladder, rounds, cg)
-            previous = self._bring_back(previous, ladder, rounds, cg, most=RETURN_ROUNDS)
-            previous = self._trial_return(previous, ladder, rounds, cg)
-            # Then cross-validation, on every ray kept (the true ones back): a coarse fit
-            # without each of them, and the rays those fits miss are rejected; the ladder is
-            # refitted from the fit so far, the rays the new fit meets come back (once), and
-            # the rest are tried back together (a true feature's rays, each unforeseeable from
-            # the others, make it together). Only from a fit that meets the kept normals within
-            # noise (as for the trial): the lost bottle's blob under lamps, refitted without
-            # the rays it misses, looked supported
-            if self._kept_median(previous) <= TRIAL_DEG and self._cross_validate(
-                    previous, coarse[0]):
-                self._say("the ladder again, without the highlights cross-validation rejects")
-                previous = self._ladder(ladder, rounds, cg, quiet=True, start=previous)
-                previous = self._bring_back(previous, ladder, rounds, cg, most=1)
-                previous = self._trial_return(previous, ladder, rounds, cg)
-            self._anchor(previous)
-            self._update_weights(previous)
-            self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
-                                                                 != K.ANCHOR_NONE)
-            wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[previous.f, previous.world_h],
-                      outputs=[out], device=self.device)
-            pockets = fill_pockets(out, both=self._one_side)
+            one_side = self._one_side
+            best = None
+            for prior in ([self._best[1], None] if shaped else [None]):
+                self.prior = prior
+                self._one_side = one_side and prior is None
+                if shaped:
+                    name = _PRIOR_NAMES.get(type(prior), "quadric")
+                    self._say(f"the grid fit about the {name}")
+                tried_rounds: list[int] = []
+                tried_cg: list[int] = []
+                level = self._grid_fit(ladder, tried_rounds, tried_cg)
+                score = self._fit_score(level)
+                rounds += tried_rounds
+                cg += tried_cg
+                if best is not None and score <= best[0]:
+                    continue
+                self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
+                                                                     != K.ANCHOR_NONE)
+                wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[level.f, level.world_h],
+                          outputs=[out], device=self.device)
+                pockets = fill_pockets(out, both=self._one_side)
+                best = (score, prior, self._one_side, self.weights.copy(), self.residual.copy(),
+                        self.excluded.copy())
+                # free the fine level's arrays before the next fit allocates its own
+                level = self._rays_level = None
+            _, self.prior, self._one_side, self.weights, self.residual, self.excluded = best
         rejected = np.flatnonzero(self.weights == 0.0)
         return FitReport(levels=ladder, rounds=rounds, weights=self.weights.copy(),
                          residual_deg=self.residual.copy(), rejected=rejected, guess=guess.kind,
                          cg_iterations=cg, distance=not ladder, pockets=pockets, shape=shape,
                          prior=(_PRIOR_NAMES.get(type(self.prior), "quadric")
                                 if shape == "grid" else None))
+
+    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
+        """The grid fit about the current prior, false highlights rejected; the last level.
+
+        Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
+        normals it misses by far more than the others'; a stiff fit cannot bend to a false
+        normal, and a supple one no longer feels those already gone. Then the whole ladder
+        without them, and the rejected rays whose normals that fit meets after all (a stiff
+        pass also misses a sharp but true bend) come back, with the ladder refitted from that
+        fit (from the prior, a grazing ray back would be met where it first crossed the prior
+        again, far before its true hit). Then cross-validation, on every ray kept (the true
+        ones back): a coarse fit without each of them, and the rays those fits miss are
+        rejected; the ladder is refitted from the fit so far, the rays the new fit meets come
+        back (once), and the rest are tried back together (a true feature's rays, each
+        unforeseeable from the others, make it together). Only from a fit that meets the kept
+        normals within noise (as for the trial): the lost bottle's blob under lamps, refitted
+        without the rays it misses, looked supported.
+        """
+        self.excluded = np.zeros(self.m, dtype=bool)
+        coarse = [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
+        for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
+            self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
+                      f"(grids {', '.join(map(str, coarse))})")
+            self._ladder(coarse, [], [], smoothness=smoothness, third=0.0, quiet=True)
+            self.excluded |= self._outliers()
+        previous = self._ladder(ladder, rounds, cg)
+        previous = self._bring_back(previous, ladder, rounds, cg, most=RETURN_ROUNDS)
+        previous = self._trial_return(previous, ladder, rounds, cg)
+        if self._kept_median(previous) <= TRIAL_DEG and self._cross_validate(
+                previous, coarse[0]):
+            self._say("the ladder again, without the highlights cross-validation rejects")
+            previous = self._ladder(ladder, rounds, cg, quiet=True, start=previous)
+            previous = self._bring_back(previous, ladder, rounds, cg, most=1)
+            previous = self._trial_return(previous, ladder, rounds, cg)
+        return previous
+
+    def _fit_score(self, level: _Level) -> tuple[int, float]:
+        """How well a grid fit explains the rays, larger is better (anchors them on it).
+
+        The kept rays that cross its zero set where it meets their normals within
+        :data:`RETURN_DEG`, then the negated median miss of the kept normals (degrees). Two
+        fits about different priors are compared by it: the data decides. Crossings alone
+        do not tell: a fat blob that every ray crosses, missing half the normals by 15-90
+        degrees, would beat the bottle that meets all it keeps within 3.
+        """
+        median = self._kept_median(level)
+        met = (~self.excluded & (self.kind.numpy() == K.ANCHOR_CROSSING)
+               & (self.residual <= RETURN_DEG))
+        return int(met.sum()), -median
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
                 smoothness: float | None = None, third: float | None = None,
