@@ -310,6 +310,8 @@ def test_redistance_beyond_float32_gives_finite_distances():
 
 _PATCHED_RUN = """
 import os, signal, sys
+# as started from a terminal: a test runner started in the background passes SIGINT ignored
+signal.signal(signal.SIGINT, signal.default_int_handler)
 import warpspec.mesh
 def write_ply(path, vertices, faces, **kwargs):
     open(path, "wb").write(b"ply\\nformat ascii 1.0\\nelement vertex 99")  # half a mesh
