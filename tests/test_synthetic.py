@@ -612,3 +612,13 @@ def test_blob_normal_intersection_closest_point_and_chart():
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1)[:, None]
+
+
+@pytest.mark.parametrize("name, seed", [("bottle", 2), ("bottle-lamps", 0)])
+def test_a_ray_along_the_bottles_axis_outside_it_misses(name, seed):
+    """A ray parallel to the axis of a surface of revolution, outside its body, meets nothing.
+    Its span inside the bounding cylinder is empty or unbounded; the march overflowed
+    converting an infinite span to a sample count."""
+    surf = make_scene(name, seed=seed).surface
+    base = surf.base + 2 * surf.body * surf.e1 - 3 * surf.axis
+    assert np.all(np.isinf(surf.intersect(base[None], surf.axis[None])))

@@ -301,12 +301,8 @@ class Blob(Surface):
         o, d = _points(origins), _points(directions)
         # only the ball of radius ``largest`` can hold a crossing
         oc = o - self.centre
-        a, b = _dot(d, d), 2 * _dot(d, oc)
-        c = _dot(oc, oc) - (self.largest * (1 + 1e-6)) ** 2
-        disc = b * b - 4 * a * c
-        root = np.sqrt(np.where(disc >= 0, disc, 0.0))
-        t0 = np.where(disc >= 0, (-b - root) / (2 * a), np.inf)
-        t1 = np.where(disc >= 0, (-b + root) / (2 * a), -np.inf)
+        t0, t1 = _quadratic_span(_dot(d, d), 2 * _dot(d, oc),
+                                 _dot(oc, oc) - (self.largest * (1 + 1e-6)) ** 2)
         norm = np.linalg.norm(d, axis=1).max(initial=1.0)
         return _march(self.implicit, o, d, np.maximum(t0, t_min), t1,
                       step=0.002 * self.radius / norm)
@@ -857,7 +853,10 @@ def _march(
     """
     o, d = _points(origins), _points(directions)
     out = np.full(len(o), np.inf)
-    todo = np.flatnonzero(np.isfinite(t0) & np.isfinite(t1) & (t1 > t0))
+    with np.errstate(over="ignore", invalid="ignore"):
+        span = t1 - t0
+    # a ray all but parallel to a cylinder's axis spans more than a float holds: not searched
+    todo = np.flatnonzero(np.isfinite(span) & (span > 0))
     if len(todo) == 0:
         return out
     span = float(np.max(t1[todo] - t0[todo]))
@@ -885,6 +884,22 @@ def _march(
         hi = np.where(same, hi, mid)
     out[idx] = np.where(flo == 0, lo, 0.5 * (lo + hi))
     return out
+
+
+def _quadratic_span(a: np.ndarray, b: np.ndarray, c: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Ray parameters ``(t0, t1)`` where ``a t^2 + b t + c <= 0`` (``a >= 0``; empty: t0 > t1).
+
+    The inside of a ball or an infinite cylinder along rays; ``a == 0`` (a ray along the
+    cylinder's axis) gives ``(-inf, inf)``, which :func:`_march` does not search.
+    """
+    disc = b * b - 4 * a * c
+    meets = (a > 0) & (disc >= 0)
+    root = np.sqrt(np.where(meets, disc, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t0 = np.where(meets, (-b - root) / (2 * a), np.where(a > 0, np.inf, -np.inf))
+        t1 = np.where(meets, (-b + root) / (2 * a), np.where(a > 0, -np.inf, np.inf))
+    return t0, t1
 
 
 def _box_interval(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray
@@ -1136,15 +1151,10 @@ class Revolution(Surface):
         hull = Cylinder(self.base, self.axis, self.body * (1 + 1e-6))
         oc, _ = hull._radial(o)
         dc = d - (d @ self.axis)[:, None] * self.axis
-        a, b, c = _dot(dc, dc), 2 * _dot(dc, oc), _dot(oc, oc) - hull.radius**2
-        with np.errstate(invalid="ignore", divide="ignore"):
-            disc = np.sqrt(np.where(b * b - 4 * a * c >= 0, b * b - 4 * a * c, np.nan))
-            t0 = np.where(a > 0, (-b - disc) / (2 * a), -np.inf)
-            t1 = np.where(a > 0, (-b + disc) / (2 * a), np.inf)
-        t0 = np.maximum(np.nan_to_num(t0, nan=np.inf), t_min)
-        t1 = np.nan_to_num(t1, nan=-np.inf)
+        t0, t1 = _quadratic_span(_dot(dc, dc), 2 * _dot(dc, oc), _dot(oc, oc) - hull.radius**2)
         norm = np.linalg.norm(d, axis=1).max(initial=1.0)
-        return _march(self.implicit, o, d, t0, t1, step=0.01 * self.neck / norm)
+        return _march(self.implicit, o, d, np.maximum(t0, t_min), t1,
+                      step=0.01 * self.neck / norm)
 
     def mesh(self, *, sections: int = 128, extent: tuple[float, float] | None = None
              ) -> trimesh.Trimesh:
