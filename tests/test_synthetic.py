@@ -622,3 +622,14 @@ def test_a_ray_along_the_bottles_axis_outside_it_misses(name, seed):
     surf = make_scene(name, seed=seed).surface
     base = surf.base + 2 * surf.body * surf.e1 - 3 * surf.axis
     assert np.all(np.isinf(surf.intersect(base[None], surf.axis[None])))
+
+
+@pytest.mark.parametrize("name, seed", [("bottle", 1), ("bottle", 2), ("bottle-lamps", 0)])
+def test_a_ray_along_the_bottles_axis_meets_its_shoulder(name, seed):
+    """A ray parallel to the axis (exactly, or within float rounding: the scenes' axes give
+    both), midway between the neck's and the body's radius, crosses the shoulder at its
+    middle height, where the radius is their mean."""
+    surf = make_scene(name, seed=seed).surface
+    o = surf.base + 0.5 * (surf.body + surf.neck) * surf.e1 - 3 * surf.axis
+    t = surf.intersect(o[None], surf.axis[None])[0]
+    assert abs(t - 3 - surf.shoulder) < 1e-9

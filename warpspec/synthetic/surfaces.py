@@ -890,15 +890,17 @@ def _quadratic_span(a: np.ndarray, b: np.ndarray, c: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Ray parameters ``(t0, t1)`` where ``a t^2 + b t + c <= 0`` (``a >= 0``; empty: t0 > t1).
 
-    The inside of a ball or an infinite cylinder along rays; ``a == 0`` (a ray along the
-    cylinder's axis) gives ``(-inf, inf)``, which :func:`_march` does not search.
+    The inside of a ball or an infinite cylinder along rays. Where ``a == 0`` (a ray along
+    the cylinder's axis, ``b == 0`` too) it is every ``t`` when ``c <= 0`` (``(-inf, inf)``,
+    which :func:`_march` does not search: bound it first) and none otherwise.
     """
     disc = b * b - 4 * a * c
     meets = (a > 0) & (disc >= 0)
+    along = (a == 0) & (c <= 0)
     root = np.sqrt(np.where(meets, disc, 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        t0 = np.where(meets, (-b - root) / (2 * a), np.where(a > 0, np.inf, -np.inf))
-        t1 = np.where(meets, (-b + root) / (2 * a), np.where(a > 0, -np.inf, np.inf))
+        t0 = np.where(meets, (-b - root) / (2 * a), np.where(along, -np.inf, np.inf))
+        t1 = np.where(meets, (-b + root) / (2 * a), np.where(along, np.inf, -np.inf))
     return t0, t1
 
 
@@ -1038,6 +1040,10 @@ class Torus(Surface):
         return _orient(m, self)
 
 
+SHOULDER_WIDTHS = 40.0
+"""Half-height, in shoulder widths, of the band where a :class:`Revolution`'s radius changes."""
+
+
 class Revolution(Surface):
     """A bottle-like surface of revolution: radius ``neck + (body - neck) (1 - tanh s) / 2``.
 
@@ -1151,7 +1157,20 @@ class Revolution(Surface):
         hull = Cylinder(self.base, self.axis, self.body * (1 + 1e-6))
         oc, _ = hull._radial(o)
         dc = d - (d @ self.axis)[:, None] * self.axis
-        t0, t1 = _quadratic_span(_dot(dc, dc), 2 * _dot(dc, oc), _dot(oc, oc) - hull.radius**2)
+        a = _dot(dc, dc)
+        # a ray within 1e-12 rad of the axis keeps its distance from it: its span inside the
+        # cylinder is unbounded or ~1e16 long, and it can cross only where the radius changes
+        along = a <= 1e-24 * _dot(d, d)
+        t0, t1 = _quadratic_span(np.where(along, 0.0, a), np.where(along, 0.0, 2 * _dot(dc, oc)),
+                                 _dot(oc, oc) - hull.radius**2)
+        if along.any():
+            # beyond SHOULDER_WIDTHS widths of the shoulder the radius is body or neck to
+            # the last bit (1 - tanh(40) is 4e-35)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ta, tb = ((self.shoulder + k * SHOULDER_WIDTHS * self.width
+                           - (o - self.base) @ self.axis) / (d @ self.axis) for k in (-1, 1))
+            t0 = np.where(along, np.maximum(t0, np.minimum(ta, tb)), t0)
+            t1 = np.where(along, np.minimum(t1, np.maximum(ta, tb)), t1)
         norm = np.linalg.norm(d, axis=1).max(initial=1.0)
         return _march(self.implicit, o, d, np.maximum(t0, t_min), t1,
                       step=0.01 * self.neck / norm)
