@@ -674,12 +674,8 @@ class ImplicitStart:
                 if shaped:
                     name = _PRIOR_NAMES.get(type(prior), "quadric")
                     self._say(f"the grid fit about the {name}")
-                tried_rounds: list[int] = []
-                tried_cg: list[int] = []
-                level = self._grid_fit(ladder, tried_rounds, tried_cg)
+                level = self._grid_fit(ladder, rounds, cg)
                 score = self._fit_score(level)
-                rounds += tried_rounds
-                cg += tried_cg
                 if best is not None and score <= best[0]:
                     continue
                 self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()

@@ -855,11 +855,11 @@ def _march(
     out = np.full(len(o), np.inf)
     with np.errstate(over="ignore", invalid="ignore"):
         span = t1 - t0
-    # a ray all but parallel to a cylinder's axis spans more than a float holds: not searched
+    # an unbounded span (or one past the largest float) is not searched
     todo = np.flatnonzero(np.isfinite(span) & (span > 0))
     if len(todo) == 0:
         return out
-    span = float(np.max(t1[todo] - t0[todo]))
+    span = float(np.max(span[todo]))
     k = int(min(max(math.ceil(span / step), 2), 4096)) + 1
     s = np.linspace(0.0, 1.0, k)
     ts = t0[todo, None] + s[None, :] * (t1[todo] - t0[todo])[:, None]
