@@ -100,3 +100,37 @@ def test_points_off_the_torus_by_their_noise_still_let_it_be_the_start(seed):
     assert mesh.is_watertight and mesh.euler_number == 0
     err = np.abs(_truth(synthetic).value(result.vertices))
     assert err.mean() < 0.3 * result.grid.spacing
+
+
+@pytest.mark.parametrize(("seed", "outliers"), [(0, 0.0), (3, 0.0), (5, 0.0), (1, 0.25)])
+def test_a_torus_under_a_point_lamp_is_the_start(seed, outliers):
+    """Under a point lamp the normal a ray asks moves with its hit. Undamped, the rounds of
+    fitting and intersecting swung about the torus (seed 0: its centre 0.009, 0.010, 0.016,
+    0.024, 0.036 off along the axis in turn) and none met the normals; the quadric can meet
+    too few rays for a first fit (18 of 48); with a quarter false, the false normal lines
+    pulled every round's torus off. Of seeds 0-5, only seed 1 clean was a torus before."""
+    synthetic = make_scene("torus-point", seed=seed, outliers=outliers)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert solver.fit_report.shape == "torus"
+    solver.run(1)
+    result = solver.result()
+    mesh = result.mesh.copy()
+    mesh.merge_vertices()
+    assert mesh.is_watertight and mesh.euler_number == 0
+    err = np.abs(_truth(synthetic).value(result.vertices)) / result.grid.spacing
+    assert err.mean() < 0.05 and err.max() < 0.3
+
+
+def test_the_points_ellipsoid_passes_through_points_on_its_axes():
+    from warpspec.implicit import points_ellipsoid
+
+    centre, radii = np.array([0.2, -0.1, 0.3]), np.array([1.0, 0.6, 0.3])
+    tips = np.concatenate([np.diag(radii), -np.diag(radii)]) + centre
+    q = points_ellipsoid(tips, np.full(3, -2.0), np.full(3, 2.0))
+    # q is -1 at the centre; the covariance's thousandth of its trace leaves the tips of the
+    # thinnest axis (a tenth of the trace) at q = -0.012
+    assert np.abs(q.value(tips)).max() < 0.02
+    assert q.value(centre[None])[0] == pytest.approx(-1.0, abs=0.02)
+    assert np.all(q.value(centre + 0.95 * (tips - centre)) < 0)
+    assert np.all(q.value(centre + 1.05 * (tips - centre)) > 0)
+    assert points_ellipsoid(tips[:3], np.full(3, -2.0), np.full(3, 2.0)) is None

@@ -21,15 +21,15 @@ Built-in scenes (:func:`make_scene`) reproduce the paper's experiments with look
 ``saddle``. Their geometry is fixed; ``seed`` drives only the pixel noise and the outliers.
 
 A second set covers every shape class, its geometry varied a little by ``seed`` (sizes, axis
-ratios, bump positions, camera jitter, which points are chosen): closed objects seen all
-around (``sphere-around``, ``ellipsoid-around`` with a lamp per camera, ``torus`` by flash and
-``torus-lamps`` with a lamp per camera, and ``blob``, a sphere raised by bumps that no
-closed-form shape fits), a ``bottle`` open at the domain's ends (by flash,
-and ``bottle-lamps`` with a lamp per camera), a ``wrap`` patch spanning more than 180
-degrees, a ``freeform`` height field (``highlights`` chooses how many) and a ``point-light``
-dome. Their outliers are false highlights on the object (a pixel whose ray meets the truth where the
-reflection law's normal is wrong by 15 degrees or more), and their truth records whether it is
-closed and its Euler number.
+ratios, bump positions, camera jitter, which points are chosen): closed objects seen all around
+(``sphere-around``, ``ellipsoid-around`` with a lamp per camera, ``torus`` by flash and
+``torus-lamps`` with a lamp per camera, ``torus-point`` under one point lamp, and ``blob``, a
+sphere raised by bumps that no closed-form shape fits), a ``bottle`` open at the domain's ends
+(by flash, and ``bottle-lamps`` with a lamp per camera), a ``wrap`` patch spanning more than
+180 degrees, a ``freeform`` height field (``highlights`` chooses how many) and a
+``point-light`` dome. Their outliers are false highlights on the object (a pixel whose ray meets the
+truth where the reflection law's normal is wrong by 15 degrees or more), and their truth
+records whether it is closed and its Euler number.
 
 The package: :mod:`.surfaces` (the protocol and the shapes), :mod:`.cameras` (intrinsics, camera
 placement, patches, highlight search), :mod:`.scenes` (:class:`SyntheticScene`, building scenes

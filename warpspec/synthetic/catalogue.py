@@ -367,7 +367,7 @@ def torus(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synthe
     one above and one below looking through the hole; each keeps up to 3 visible highlights
     (a torus shows several). Eight points; domain: the box grown by 12% of the diameter.
     """
-    return _torus(noise=noise, outliers=outliers, seed=seed, lamps=False)
+    return _torus(noise=noise, outliers=outliers, seed=seed, lighting="flash")
 
 
 def torus_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
@@ -377,10 +377,26 @@ def torus_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     Each lamp is 25-40 degrees off its camera's viewing direction (as in
     ``ellipsoid-around``), so a ray is no longer a normal line of the surface.
     """
-    return _torus(noise=noise, outliers=outliers, seed=seed, lamps=True)
+    return _torus(noise=noise, outliers=outliers, seed=seed, lighting="lamps")
 
 
-def _torus(*, noise: float, outliers: float, seed: int, lamps: bool) -> SyntheticScene:
+TORUS_POINT_VIEW_DEG = 75.0
+"""Under a point lamp a torus shows highlights seen almost edge on (up to 88 degrees from the
+normal), where a detector finds no glint: ``torus-point`` keeps those seen within this."""
+
+
+def torus_point(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
+                ) -> SyntheticScene:
+    """The ``torus`` scene's shape and cameras under one point lamp 3 from its centre.
+
+    The lamp stands 20-40 degrees off the axis (by seed), above the ring; the normal the
+    reflection law asks moves with the point where a ray meets the surface. Highlights seen
+    more than 75 degrees off their normal are left out.
+    """
+    return _torus(noise=noise, outliers=outliers, seed=seed, lighting="point")
+
+
+def _torus(*, noise: float, outliers: float, seed: int, lighting: str) -> SyntheticScene:
     rng = _shape_rng(seed, "torus")
     major = float(rng.uniform(0.95, 1.05))
     minor = major * float(rng.uniform(0.33, 0.37))
@@ -392,13 +408,24 @@ def _torus(*, noise: float, outliers: float, seed: int, lamps: bool) -> Syntheti
     t1, _ = _tangent_basis(axis)
     poles = [_normalize(s * axis + 0.12 * t1 + 0.05 * rng.standard_normal(3)) for s in (1, -1)]
     dirs = np.concatenate([dirs, poles])
-    light = _lamps(dirs, _shape_rng(seed, "torus-lamps")) if lamps else CameraLight()
+    name = "torus" if lighting == "flash" else f"torus-{lighting}"
+    if lighting == "lamps":
+        light = _lamps(dirs, _shape_rng(seed, name))
+    elif lighting == "point":
+        lamp_rng = _shape_rng(seed, name)
+        t1, t2 = _tangent_basis(axis)
+        tilt, az = math.radians(lamp_rng.uniform(20.0, 40.0)), lamp_rng.uniform(0, 2 * math.pi)
+        towards = math.cos(tilt) * axis + math.sin(tilt) * (math.cos(az) * t1 + math.sin(az) * t2)
+        light = PointLight(centre + 3.0 * towards)
+    else:
+        light = CameraLight()
     return scene_from_path(
         surf, centre + 4.0 * dirs, light=light, look_at_points=centre,
         points=_pick_points(mesh.vertices, surf, 8, rng), domain=_margin_box(mesh.vertices),
         candidates=mesh.vertices, intrinsics=Intrinsics(focal=560.0), up=axis,
-        name="torus-lamps" if lamps else "torus", noise=noise, outliers=outliers, seed=seed,
+        name=name, noise=noise, outliers=outliers, seed=seed,
         per_view=3, false_highlights="surface", closed=True, euler=0,
+        max_view_deg=TORUS_POINT_VIEW_DEG if lighting == "point" else None,
     )
 
 
@@ -605,6 +632,7 @@ SCENES: dict[str, Callable[..., SyntheticScene]] = {
     "ellipsoid-around": ellipsoid_around,
     "torus": torus,
     "torus-lamps": torus_lamps,
+    "torus-point": torus_point,
     "blob": blob,
     "bottle": bottle,
     "bottle-lamps": bottle_lamps,

@@ -476,6 +476,7 @@ def scene_from_path(
     false_highlights: str = "image",
     closed: bool = False,
     euler: int | None = None,
+    max_view_deg: float | None = None,
 ) -> SyntheticScene:
     """A scene from cameras along a path, like a video: each sees the highlight where it falls.
 
@@ -506,6 +507,8 @@ def scene_from_path(
             object, with a wrong normal (see :class:`SyntheticScene`).
         closed: Whether the truth mesh is closed.
         euler: Euler number of the truth mesh.
+        max_view_deg: Skip highlights seen more obliquely than this (degrees between the
+            surface normal and the way back to the camera); ``None``: keep all.
 
     Returns:
         The scene with its ground truth (the kept views; their specularities in view order).
@@ -534,6 +537,10 @@ def scene_from_path(
         else:
             x = find_highlight(surface, c, li, candidates=candidates, patch=patch)
             found = np.zeros((0, 3)) if x is None else x[None]
+        if len(found) and max_view_deg is not None:
+            back = c - found
+            cos = np.einsum("ij,ij->i", surface.normal(found), back) / np.linalg.norm(back, axis=1)
+            found = found[cos >= math.cos(math.radians(max_view_deg))]
         if len(found) == 0:
             continue
         P = look_at(c, target, intrinsics=intrinsics, up=up)
