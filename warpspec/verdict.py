@@ -28,11 +28,16 @@ __all__ = [
     "support_distance",
 ]
 
-MIN_HIT_FRACTION = 0.5
+MIN_HIT_FRACTION = 2.0 / 3.0
 """Least fraction of the specular rays that must meet the final surface.
 
-A ray that misses contributes no normal; when most miss, the surface was shaped by the start
-and the smoothness term, not by the highlights it was asked to explain."""
+A ray that misses contributes no normal; when many miss, the surface was shaped by the start
+and the smoothness term, not by the highlights it was asked to explain. On the built-in
+scenes of every shape class (seeds 0-1, clean and with 10% and 25% false highlights) at most
+4% of the rays miss a result that is right; a torus under a point lamp with a quarter false,
+fitted as a sheet 1.9-4.2 voxels off and open, was met by 56% (more than half: it was called
+supported), and a false highlight whose ray passes the object still leaves three in four
+hitting at a quarter false."""
 
 MAX_NORMAL_ERROR_DEG = 25.0
 """Largest median angle, in degrees, between the surface normal and the reflection law's
