@@ -405,7 +405,7 @@ def _torus(*, noise: float, outliers: float, seed: int, lighting: str) -> Synthe
     surf = Torus(centre, axis, major, minor)
     mesh = surf.mesh()
     dirs = _around(30, rng)
-    t1, _ = _tangent_basis(axis)
+    t1, t2 = _tangent_basis(axis)
     poles = [_normalize(s * axis + 0.12 * t1 + 0.05 * rng.standard_normal(3)) for s in (1, -1)]
     dirs = np.concatenate([dirs, poles])
     name = "torus" if lighting == "flash" else f"torus-{lighting}"
@@ -413,7 +413,6 @@ def _torus(*, noise: float, outliers: float, seed: int, lighting: str) -> Synthe
         light = _lamps(dirs, _shape_rng(seed, name))
     elif lighting == "point":
         lamp_rng = _shape_rng(seed, name)
-        t1, t2 = _tangent_basis(axis)
         tilt, az = math.radians(lamp_rng.uniform(20.0, 40.0)), lamp_rng.uniform(0, 2 * math.pi)
         towards = math.cos(tilt) * axis + math.sin(tilt) * (math.cos(az) * t1 + math.sin(az) * t2)
         light = PointLight(centre + 3.0 * towards)
