@@ -327,7 +327,7 @@ def test_false_highlights_a_supple_fit_follows_are_rejected_by_cross_validation(
     out one at a time, the false ones are missed by the fits made without them far more than
     the true ones: at least 4 are rejected, and no true one. (Two of seed 4's are hits at
     corners of the hits' hull, where a fit without them extrapolates and only a miss past
-    30 degrees counts. Ten folds and a limit of 3 robust standard deviations rejected 5 on
+    CV_HULL_DEG counts. Ten folds and a limit of 3 robust standard deviations rejected 5 on
     each seed here, but 1-4 of 15 with a quarter false at 64 cells, seeds 3, 5, 7, 12, where
     the leave-one-out passes reject 6-11.)"""
     synthetic = make_scene("freeform", seed=seed, outliers=0.1)
@@ -340,9 +340,9 @@ def test_false_highlights_a_supple_fit_follows_are_rejected_by_cross_validation(
 
 def test_a_true_normal_at_a_corner_of_the_hits_hull_is_kept_by_cross_validation():
     """On the clean free-form patch with 30 highlights (seed 0), ray 1 meets it at a corner
-    of the hits' hull, where a fit made without it extrapolates and misses its true normal by
-    16 degrees at 16 cells. A corner needs 30 degrees: at the inner rays' 15 it is rejected
-    (at 32 cells too) and the patch is 0.60 h off at 64 cells instead of 0.43."""
+    of the hits' hull, where a fit made without it extrapolates: a corner's limit is wider
+    than the inner rays' (CV_HULL_DEG against CV_DEG). Rejected, the patch was 0.60 h off at
+    64 cells instead of 0.43."""
     synthetic = make_scene("freeform", seed=0, highlights=30)
     result = ws.reconstruct(synthetic.scene(), resolution=32, iterations=20, device="cpu")
     assert 1 not in {r["index"] for r in result.rejected}
@@ -533,7 +533,7 @@ def test_the_set_up_reports_its_stages():
                      progress=said.append)
     assert said[0].startswith("a quadric fitted to 60 rays and 5 points")
     assert "grid 16 of 16, 32" in said and "grid 32 of 16, 32" in said
-    assert "cross-validation pass 1 of 8 (60 folds, grid 16)" in said
+    assert "cross-validation pass 1 of 8 (60 folds, grid 32)" in said
 
 
 def test_fill_pockets_removes_sealed_regions_and_keeps_the_sheet(device):

@@ -24,7 +24,7 @@
    when the kept rays' median miss does not grow (:meth:`ImplicitStart._trial_return`).
    Last, cross-validation finds the false normals a supple fit follows: each kept ray's normal
    is compared with a coarse fit made without it (:meth:`ImplicitStart._cross_validate`);
-   the worst of those missed by more than RETURN_DEG (LIMIT_DEG where the fit without it
+   the worst of those missed by more than CV_DEG (CV_HULL_DEG where the fit without it
    extrapolates) are rejected, pass after pass, and the ladder refitted; a ray that fit meets
    after all comes back once more, and the rest are tried back together again.
 
@@ -105,6 +105,18 @@ false, 1-4 were rejected and the surface was 0.63-0.78 h off, now 6-11 and 0.23-
 false ones removed by hand: 0.16 h on seed 12). Leaving out a tenth at a time removes the
 neighbours that would tell a true feature apart, and the robust spread of misses made with a
 quarter false grows with them."""
+CV_DEG = 10.0
+"""A cross-validation pass rejects a ray whose normal the fit made without it misses by more
+than this (degrees), or by more than CV_HULL_DEG where the ray meets the reference at a corner
+of the kept hits' hull (seen from one side): there a fit without it extrapolates. The passes
+fit the finest level up to ROBUST_TOP (32 cells at 64): at 16 cells the fit cannot hold the
+free-form patch's bump, and true normals were missed out of sample by up to 15-18 degrees,
+with 60 highlights or 120, as many false ones were (10-20). At 32 cells, clean, with 120
+highlights, none was missed by more than 6.4 (false: mostly 12-30). Free-form patch, seeds
+0-7 with 60 highlights and 0-3 with 120, error against the clean scene's: with a tenth false,
+seven of eight within 0.1 h (five at 16 cells with 15 and 30 degrees) and four of four; with
+a quarter, 0.02-0.33 h (0.01-0.39) and three of four (two); the clean scenes unchanged."""
+CV_HULL_DEG = 15.0
 CV_PASSES = 8
 """Most cross-validation passes; each refits its reference from the one before's, without the
 rays rejected so far."""
@@ -757,7 +769,7 @@ class ImplicitStart:
         previous = self._bring_back(previous, ladder, rounds, cg, most=RETURN_ROUNDS)
         previous = self._trial_return(previous, ladder, rounds, cg)
         if self._kept_median(previous) <= TRIAL_DEG and self._cross_validate(
-                previous, coarse[0]):
+                previous, coarse[-1]):
             self._say("the ladder again, without the highlights cross-validation rejects")
             previous = self._ladder(ladder, rounds, cg, quiet=True, start=previous)
             previous = self._bring_back(previous, ladder, rounds, cg, most=1)
@@ -884,14 +896,13 @@ class ImplicitStart:
         """Reject the rays whose normals fits made without them miss (out of sample).
 
         Each of at most :data:`CV_PASSES` passes fits the level of ``resolution`` cells (the
-        coarsest) with every kept ray (the reference, from the pass before's, the first from
-        ``start``), then once without each of :data:`CV_FOLDS` folds of them (one ray each
-        while they are that few), from the reference and with the final fit's smoothness. A
-        fold's rays are rejected when that fit misses their normals by more than
-        :data:`RETURN_DEG`, or by more than :data:`LIMIT_DEG` where a ray meets the reference
+        finest up to ROBUST_TOP) with every kept ray (the reference, from the pass before's,
+        the first from ``start``), then once without each of :data:`CV_FOLDS` folds of them
+        (one ray each while they are that few), from the reference and with the final fit's
+        smoothness. A fold's rays are rejected when that fit misses their normals by more than
+        :data:`CV_DEG`, or by more than :data:`CV_HULL_DEG` where a ray meets the reference
         at a corner of the kept hits' hull (seen from one side): there a fit without it
-        extrapolates, and a true normal at the patch's edge is missed by 16 degrees (the
-        free-form patch with 30 highlights, seed 0). At most :data:`CV_SHARE` of the kept
+        extrapolates. At most :data:`CV_SHARE` of the kept
         rays per pass, the worst missed first; a pass that rejects none ends them. Returns
         whether any ray was rejected.
         """
@@ -919,7 +930,7 @@ class ImplicitStart:
                 self._update_weights(level)
                 miss[held] = self.residual[held]
             self.excluded = base
-            over = ~base & (miss < 180.0) & (miss > np.where(inner, RETURN_DEG, LIMIT_DEG))
+            over = ~base & (miss < 180.0) & (miss > np.where(inner, CV_DEG, CV_HULL_DEG))
             most = math.ceil(CV_SHARE * len(kept))
             if int(over.sum()) > most:
                 worst = np.argsort(np.where(over, -miss, np.inf), kind="stable")[:most]
