@@ -902,9 +902,8 @@ class ImplicitStart:
         smoothness. A fold's rays are rejected when that fit misses their normals by more than
         :data:`CV_DEG`, or by more than :data:`CV_HULL_DEG` where a ray meets the reference
         at a corner of the kept hits' hull (seen from one side): there a fit without it
-        extrapolates. At most :data:`CV_SHARE` of the kept
-        rays per pass, the worst missed first; a pass that rejects none ends them. Returns
-        whether any ray was rejected.
+        extrapolates. At most :data:`CV_SHARE` of the kept rays per pass, the worst missed
+        first; a pass that rejects none ends them. Returns whether any ray was rejected.
         """
         rejected = False
         reference = start
