@@ -784,11 +784,18 @@ class ImplicitStart:
         fits about different priors are compared by it: the data decides. Crossings alone
         do not tell: a fat blob that every ray crosses, missing half the normals by 15-90
         degrees, would beat the bottle that meets all it keeps within 3.
+
+        Medians within :data:`QUADRIC_DEG` (noise) tie, and a tie keeps the fit about the
+        shaped prior (tried first): it explained more normals by itself. A bottle seen by
+        21 flash-lit rays and 3 points (seed 1 of ``bottle`` with half its highlights): both
+        fits met all 21 normals, about the surface of revolution with a median miss of 0.58
+        degrees, about the quadric 0.40, and the quadric's was taken, 1.34 h from the
+        truth; the revolution's is 0.91 h.
         """
         median = self._kept_median(level)
         met = (~self.excluded & (self.kind.numpy() == K.ANCHOR_CROSSING)
                & (self.residual <= RETURN_DEG))
-        return int(met.sum()), -median
+        return int(met.sum()), -max(median, QUADRIC_DEG)
 
     def _ladder(self, ladder: list[int], rounds: list[int], cg: list[int], *,
                 smoothness: float | None = None, third: float | None = None,
