@@ -752,8 +752,7 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior()
     result = solver.result()
     mesh = result.mesh.copy()
     mesh.merge_vertices()
-    region = truth_region(np.asarray(synthetic.truth_points)[keep],
-                          np.asarray(synthetic.points)[points])
+    region = truth_region(synthetic.truth_points[keep], synthetic.points[points])
     h = float(result.grid.spacing)
     assert evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
                     samples=20000).chamfer / h < 1.1

@@ -790,7 +790,7 @@ class ImplicitStart:
         21 flash-lit rays and 3 points (seed 1 of ``bottle`` with half its highlights): both
         fits met all 21 normals, about the surface of revolution with a median miss of 0.58
         degrees, about the quadric 0.40, and the quadric's was taken, 1.34 h from the
-        truth; the revolution's is 0.91 h.
+        truth; the revolution's is 0.94 h.
         """
         median = self._kept_median(level)
         met = (~self.excluded & (self.kind.numpy() == K.ANCHOR_CROSSING)
