@@ -15,6 +15,9 @@ current hit, fitting and intersecting in turn. The fit (docs/DESIGN.md section 7
 4. all seven numbers refined together by robust least squares (scipy's ``soft_l1`` loss) on
    the lines' distances from the core circle and the points' distances from the torus.
 
+:func:`points_torus` is a ring through the points alone: under another light the rounds of
+fitting and intersecting may start from the rays' hits on it.
+
 The implicit start takes the torus when the quadric does not meet the normals and the torus
 does, as it would take a quadric (the same shares of rays within 3 and 10 degrees, four points
 in five within 1/64 of the domain's size).
@@ -28,7 +31,7 @@ import numpy as np
 
 from .normal_lines import best_axis, first_crossing
 
-__all__ = ["Torus", "fit_torus"]
+__all__ = ["Torus", "fit_torus", "points_torus"]
 
 MIN_RAYS = 12
 """Fewest normal lines a torus is fitted to."""
@@ -161,3 +164,42 @@ def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     if not (torus.r > 0.0 and torus.R >= RING * torus.r):
         return None
     return torus
+
+
+def points_torus(points: np.ndarray) -> Torus | None:
+    """A ring torus through the points alone: a first guess for the rounds of the fit.
+
+    The axis is the normal of the points' best-fit plane, through the centre of the circle
+    their shadows on that plane lie nearest; the core circle's radius ``R``, its height and
+    the tube's radius ``r`` are those of the circle through the points' (distance from the
+    axis, height) in the meridian plane. ``None`` for fewer than four points, points on a
+    line, or no ring (``R < RING r``).
+    """
+    from .geometry import best_fit_plane
+
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) < 4:
+        return None
+    c, axes = best_fit_plane(pts)
+    if axes is None:
+        return None
+    a = axes[2]
+    # the centre in that plane: the circle through the points' shadows on it (their
+    # centroid is the centre only when they are spread evenly round the axis)
+    xy = (pts - c) @ axes[:2].T
+    A = np.stack([2.0 * xy[:, 0], 2.0 * xy[:, 1], np.ones(len(xy))], axis=1)
+    (x0, y0, _), *_ = np.linalg.lstsq(A, np.sum(xy**2, axis=1), rcond=None)
+    c = c + x0 * axes[0] + y0 * axes[1]
+    v = pts - c
+    z = v @ a
+    rho = np.linalg.norm(v - z[:, None] * a, axis=1)
+    # the meridian section is a circle through the points' (rho, z): fitted algebraically
+    # (rho^2 + z^2 = 2 R rho + 2 z0 z + k), the centre moved along the axis to its height
+    A = np.stack([2.0 * rho, 2.0 * z, np.ones_like(rho)], axis=1)
+    (R, z0, k), *_ = np.linalg.lstsq(A, rho**2 + z**2, rcond=None)
+    R, z0 = float(R), float(z0)
+    r = float(np.sqrt(max(k + R * R + z0 * z0, 0.0)))
+    c = c + z0 * a
+    if not (r > 0.0 and R >= RING * r):
+        return None
+    return Torus(c, a, R, r)
