@@ -8,6 +8,7 @@ import warp as wp
 
 import warpspec as ws
 from warpspec import revolution as R
+from warpspec.grid import Grid
 from warpspec.kernels import implicit as K
 from warpspec.normal_lines import first_crossing
 from warpspec.revolution import SurfaceOfRevolution, fit_revolution
@@ -399,3 +400,69 @@ def test_a_shape_no_surface_of_revolution_fits_warns_nothing():
         warnings.simplefilter("error")
         solver = ws.Reconstructor(synthetic.scene(), resolution=32, device="cpu")
     assert solver.fit_report.shape == "grid"
+
+
+def test_leaving_a_slope_out_matches_the_profile_fitted_without_it():
+    """The out-of-sample misses come from one factorisation (Sherman-Morrison); each must be
+    the angle to the profile refitted from scratch without that line."""
+    rng = np.random.default_rng(4)
+    heights = np.linspace(-1.0, 1.0, 201)
+    values = (np.array([-0.8, -0.1, 0.5, 0.9]), np.array([0.5, 0.45, 0.3, 0.3]),
+              np.full(4, 20.0))
+    sh = rng.uniform(-0.95, 0.95, 12)
+    angle = rng.uniform(-0.6, 0.6, 12)
+    across = rng.uniform(0.0, 0.2, 12)  # a component across the meridian plane
+    snh, snr = np.sin(angle) * np.sqrt(1 - across**2), np.cos(angle) * np.sqrt(1 - across**2)
+    sw = rng.uniform(0.5, 1.0, 12)
+    options = {"scale": 2.0, "smoothness": 1e-6, "values": values}
+    radii, misses = R._solve_profile(heights, slopes=(sh, snh, snr, sw), leave_out=True,
+                                     **options)
+    step = heights[1] - heights[0]
+    for i in range(12):
+        keep = np.arange(12) != i
+        without, _ = R._solve_profile(
+            heights, slopes=(sh[keep], snh[keep], snr[keep], sw[keep]), **options)
+        j = int((sh[i] - heights[0]) // step)
+        slope = (without[j + 1] - without[j]) / step
+        expected = np.degrees(np.arccos(abs(snr[i] - snh[i] * slope) / np.hypot(1.0, slope)))
+        assert misses[i] == pytest.approx(expected, abs=1e-6)
+    # a slope fitted with the line meets it closer than the one made without it
+    assert np.all(misses > 0.0)
+
+
+def test_a_false_line_that_passes_near_the_axis_is_left_out():
+    """Bottle seed 11, a quarter false: one false highlight's line passes near the axis and
+    asks a slope 50 degrees off between the shoulder's band of highlights and the neck's. The
+    profile followed it, 1.1 voxels from the truth on average and 6.6 at most; left out by its
+    out-of-sample miss, 0.25 on average."""
+    synthetic = make_scene("bottle", seed=11, outliers=0.25)
+    surface, used = _fit(synthetic)
+    assert used.tolist() == synthetic.inliers.tolist()
+    lo, hi = synthetic.scene().domain
+    v = np.asarray(synthetic.truth_mesh().vertices)
+    v = v[np.all((v >= lo) & (v <= hi), axis=1)]
+    err = np.abs(surface.value(v)) / 0.02
+    assert err.mean() < 0.3 and err.max() < 1.3
+
+
+def test_a_singular_profile_system_gives_no_shape_and_no_error():
+    """The lines of a blob seen all around (seed 9) make the profile's normal equations
+    exactly singular: the out-of-sample misses are not defined then, and the fit gives no
+    shape instead of raising (it raised from the factorisation)."""
+    heights = np.linspace(-1.0, 1.0, 51)
+    empty = (np.zeros(0), np.zeros(0), np.zeros(0))
+    from scipy.sparse.linalg import MatrixRankWarning
+
+    with pytest.warns(MatrixRankWarning):
+        _, misses = R._solve_profile(
+            heights, scale=2.0, smoothness=0.0, values=empty,
+            slopes=(np.array([0.1]), np.array([0.0]), np.array([1.0]), np.array([1.0])),
+            leave_out=True)
+    assert misses.shape == (1,) and np.isnan(misses).all()
+    scene = make_scene("blob", seed=9).scene()
+    grid = Grid.from_bounds(*scene.domain, resolution=64)  # the implicit start's grid
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        surface, _ = fit_revolution(*scene.rays(), scene.points, lo=grid.origin,
+                                    hi=grid.upper, voxel=grid.spacing)
+    assert surface is None
