@@ -356,9 +356,9 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     # equations: x_-i = x + z_i (a_i . x - b_i) / (1 - a_i . z_i), z_i = N^-1 a_i
     from scipy.sparse.linalg import splu
 
-    rows_s = A[n_v:].toarray()
     if not n_s:
         return radii, np.zeros(0)
+    rows_s = A[n_v:].toarray()
     try:
         z = splu(normal).solve(rows_s.T.copy())  # (count, n_s)
     except RuntimeError:  # singular: the radii are not finite either, and no fit is made

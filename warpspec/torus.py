@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import best_fit_plane
 from .normal_lines import best_axis, first_crossing
 
 __all__ = ["Torus", "fit_torus", "points_torus"]
@@ -175,8 +176,6 @@ def points_torus(points: np.ndarray) -> Torus | None:
     axis, height) in the meridian plane. ``None`` for fewer than four points, points on a
     line, or no ring (``R < RING r``).
     """
-    from .geometry import best_fit_plane
-
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) < 4:
         return None
@@ -187,19 +186,26 @@ def points_torus(points: np.ndarray) -> Torus | None:
     # the centre in that plane: the circle through the points' shadows on it (their
     # centroid is the centre only when they are spread evenly round the axis)
     xy = (pts - c) @ axes[:2].T
-    A = np.stack([2.0 * xy[:, 0], 2.0 * xy[:, 1], np.ones(len(xy))], axis=1)
-    (x0, y0, _), *_ = np.linalg.lstsq(A, np.sum(xy**2, axis=1), rcond=None)
+    x0, y0, _ = _circle_through(xy[:, 0], xy[:, 1])
     c = c + x0 * axes[0] + y0 * axes[1]
     v = pts - c
     z = v @ a
     rho = np.linalg.norm(v - z[:, None] * a, axis=1)
-    # the meridian section is a circle through the points' (rho, z): fitted algebraically
-    # (rho^2 + z^2 = 2 R rho + 2 z0 z + k), the centre moved along the axis to its height
-    A = np.stack([2.0 * rho, 2.0 * z, np.ones_like(rho)], axis=1)
-    (R, z0, k), *_ = np.linalg.lstsq(A, rho**2 + z**2, rcond=None)
-    R, z0 = float(R), float(z0)
-    r = float(np.sqrt(max(k + R * R + z0 * z0, 0.0)))
+    # the meridian section: the circle through the points' (rho, z), its centre (R, z0)
+    R, z0, r = _circle_through(rho, z)
     c = c + z0 * a
     if not (r > 0.0 and R >= RING * r):
         return None
     return Torus(c, a, R, r)
+
+
+def _circle_through(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """The circle nearest to the points ``(x, y)``: its centre and radius.
+
+    Fitted algebraically (``x^2 + y^2 = 2 cx x + 2 cy y + k``, linear least squares): exact
+    for points on a circle.
+    """
+    A = np.stack([2.0 * x, 2.0 * y, np.ones_like(x)], axis=1)
+    (cx, cy, k), *_ = np.linalg.lstsq(A, x * x + y * y, rcond=None)
+    cx, cy = float(cx), float(cy)
+    return cx, cy, float(np.sqrt(max(k + cx * cx + cy * cy, 0.0)))
