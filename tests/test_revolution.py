@@ -466,3 +466,16 @@ def test_a_singular_profile_system_gives_no_shape_and_no_error():
         surface, _ = fit_revolution(*scene.rays(), scene.points, lo=grid.origin,
                                     hi=grid.upper, voxel=grid.spacing)
     assert surface is None
+
+
+def test_the_lines_returned_are_those_the_profile_was_fitted_to(monkeypatch):
+    """With no pass left to refit, a line the check would leave out stays in the fit, and the
+    mask returned says so (it said left out while the profile still followed it)."""
+    monkeypatch.setattr(R, "LEAVE_OUT_PASSES", 0)
+    synthetic = make_scene("bottle", seed=11, outliers=0.25)
+    surface, used = _fit(synthetic)
+    assert used.sum() == synthetic.inliers.sum() + 1  # the false line near the axis
+    lo, hi = synthetic.scene().domain
+    v = np.asarray(synthetic.truth_mesh().vertices)
+    v = v[np.all((v >= lo) & (v <= hi), axis=1)]
+    assert np.abs(surface.value(v)).mean() / 0.02 > 0.8  # it follows that line

@@ -276,11 +276,13 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     # a line that the profile fitted without it misses by more than LEAVE_OUT_DEG is left
     # out, the worst first, one at a time: a false highlight's line that passes near the axis
     # asks a slope at a height no other datum holds, and the profile follows it
-    for _ in range(LEAVE_OUT_PASSES + 1):
+    for left_out in range(LEAVE_OUT_PASSES + 1):
         radii, misses = _fit_profile(profile, ph[keep], prho[keep], p[near], n[near],
                                      scale=scale, voxel=voxel, leave_out=True)
         worst = np.where(np.isfinite(misses), misses, -1.0)
-        if worst.max() <= LEAVE_OUT_DEG or near.sum() <= MIN_RAYS:
+        # (a line is left out only where a refit follows: the radii are made without it)
+        if (worst.max() <= LEAVE_OUT_DEG or near.sum() <= MIN_RAYS
+                or left_out == LEAVE_OUT_PASSES):
             break
         near[np.flatnonzero(near)[int(np.argmax(worst))]] = False
     return SurfaceOfRevolution(c, a, heights, radii), near
