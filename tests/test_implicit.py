@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import trimesh
 import warp as wp
 
 import warpspec as ws
@@ -10,7 +11,7 @@ from warpspec.geometry import crop_to_data_hull, crop_to_unwrapped_hull
 from warpspec.grid import Grid
 from warpspec.implicit import first_guess, level_ladder, ray_convergence
 from warpspec.kernels import implicit as K
-from warpspec.mesh import is_open, supported_components, triangulate
+from warpspec.mesh import is_open, supported_components, triangulate, vertex_components
 from warpspec.solver import initial_plane
 from warpspec.synthetic import make_scene
 from warpspec.synthetic.surfaces import Cylinder
@@ -372,6 +373,30 @@ def test_mesh_pieces_far_from_the_data_are_dropped():
     assert len(kept_f) < len(f)
     assert np.all(np.abs(np.linalg.norm(kept_v - [0.8, 1.5, 1.5], axis=1) - 0.4) < 0.02)
     assert not is_open(kept_f)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_mesh_components_match_a_graph_library_on_scrambled_meshes(seed):
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(seed)
+    parts, offset = [], 0
+    for _ in range(int(rng.integers(1, 5))):
+        sphere = trimesh.creation.icosphere(subdivisions=int(rng.integers(0, 4)))
+        parts.append(sphere.faces + offset)
+        offset += len(sphere.vertices)
+    n = offset + int(rng.integers(0, 4))  # vertices no face uses are pieces of their own
+    order = rng.permutation(n)
+    faces = order[np.concatenate(parts)][rng.permutation(sum(len(p) for p in parts))]
+    if seed % 2:  # random triangles: long chains, pieces of any shape
+        faces = rng.integers(0, n, size=(n // 2, 3))
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, label = connected_components(graph, directed=False)
+    got_count, got_label = vertex_components(n, faces)
+    assert got_count == count
+    assert np.array_equal(got_label, label)
 
 
 def test_specks_of_the_level_set_are_dropped_even_beside_the_data():
@@ -777,3 +802,18 @@ def test_a_closed_blob_is_fitted_about_the_prior_that_explains_it(seed):
     assert mesh.is_watertight and mesh.euler_number == 2
     err = np.abs(synthetic.surface.implicit(result.vertices)).mean() / result.grid.spacing
     assert err < 0.25
+
+
+@pytest.mark.parametrize("anchors", [1, 37, 600])
+def test_support_distance_is_the_nearest_anchor_whichever_way_it_is_found(anchors):
+    from scipy.spatial import cKDTree
+
+    from warpspec.verdict import support_distance
+
+    rng = np.random.default_rng(anchors)
+    a = rng.uniform(-3.0, 5.0, size=(anchors, 3))
+    v = rng.uniform(-3.0, 5.0, size=(5000, 3))
+    spacing = 0.037
+    want, _ = cKDTree(a).query(v)
+    got = support_distance(v, a, spacing)
+    assert np.allclose(got, want / spacing, rtol=1e-9, atol=1e-6)

@@ -79,8 +79,14 @@ few Gaussian widths (one voxel each), and the smoothness term carries both a vox
 further; beyond three voxels the shape comes from the start and the smoothness term alone."""
 
 
+_BRUTE_FORCE_ANCHORS = 512
+"""Up to this many anchors :func:`support_distance` compares every pair; past it, a KD-tree."""
+_BRUTE_FORCE_PAIRS = 1 << 20
+"""Vertex-anchor pairs :func:`support_distance` holds at once when it compares every pair."""
+
+
 def support_distance(vertices: np.ndarray, anchors: np.ndarray, spacing: float) -> np.ndarray:
-    """Distance from each vertex to the nearest anchor, in voxel widths (a KD-tree, host side).
+    """Distance from each vertex to the nearest anchor, in voxel widths (host side).
 
     Args:
         vertices: Mesh vertices, ``(n, 3)``, world units.
@@ -94,13 +100,25 @@ def support_distance(vertices: np.ndarray, anchors: np.ndarray, spacing: float) 
     anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
     if len(anchors) == 0 or len(vertices) == 0:
         return np.full(len(vertices), np.inf)
-    from scipy.spatial import cKDTree
-
-    # Grid units: the tree's arithmetic is the same at every scale.
+    # Grid units: the arithmetic is the same at every scale.
     origin = anchors.min(axis=0)
-    tree = cKDTree((anchors - origin) / spacing)
-    dist, _ = tree.query((vertices - origin) / spacing, k=1)
-    return np.asarray(dist, dtype=np.float64)
+    a = (anchors - origin) / spacing
+    v = (vertices - origin) / spacing
+    if len(a) > _BRUTE_FORCE_ANCHORS:
+        from scipy.spatial import cKDTree
+
+        dist, _ = cKDTree(a).query(v, k=1)
+        return np.asarray(dist, dtype=np.float64)
+    # Few anchors (a scene's hits and points): every pair, a block of vertices at a time,
+    # costs less than loading the KD-tree's library.
+    out = np.empty(len(v))
+    rows = max(1, _BRUTE_FORCE_PAIRS // len(a))
+    for lo in range(0, len(v), rows):
+        block = v[lo:lo + rows]
+        d2 = (np.einsum("ij,ij->i", block, block)[:, None] - 2.0 * block @ a.T
+              + np.einsum("ij,ij->i", a, a)[None, :])
+        out[lo:lo + rows] = np.sqrt(np.maximum(d2.min(axis=1), 0.0))
+    return out
 
 
 @dataclass(frozen=True)
