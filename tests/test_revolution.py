@@ -129,6 +129,19 @@ def test_under_lamps_false_highlights_cost_refits_not_the_shape(seed):
     assert err < 0.25
 
 
+def test_under_lamps_true_highlights_the_refit_meets_are_tried_back():
+    """Seed 11, a tenth false: the first shape taken misses three true highlights by 11-14
+    degrees, and the refit without them misses them by 4-5 degrees out of sample, which makes
+    it ambiguous; fitted again with them, it meets them within a degree and rejects exactly the
+    false ones (0.63 voxel from the truth end to end before, 0.10 clean)."""
+    synthetic = make_scene("bottle-lamps", seed=11, outliers=0.1)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert solver.fit_report.shape == "revolution"
+    assert sorted(solver.fit_report.rejected) == np.flatnonzero(synthetic.outlier_mask).tolist()
+    _, err = _run(synthetic, solver, 1)
+    assert err < 0.25
+
+
 @pytest.mark.parametrize("tilted", [True, False])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_under_lamps_the_axis_is_the_one_that_makes_one_smooth_profile(seed, tilted):

@@ -1141,6 +1141,19 @@ class ImplicitStart:
                                       (accepted.base, accepted.axis), tilted=False)
             if shape is not None and (refit := self._accept(shape, hits, inside)) is not None:
                 accepted = refit
+            elif shape is not None:
+                # true highlights the first shape missed by more than REJECT_DEG are missed
+                # out of sample by the refit, a few degrees each, and a few such make it
+                # ambiguous: the rays it meets within REJECT_DEG are tried back in once
+                back = inside & (self._residuals(shape, hits, inside) <= REJECT_DEG)
+                if np.any(back & ~kept):
+                    self._say("a surface of revolution fitted again with the highlights "
+                              "the refit meets")
+                    shape, hits, inside = fit(back, self.scene.normals(hits),
+                                              (shape.base, shape.axis), tilted=False)
+                    if shape is not None and \
+                            (refit := self._accept(shape, hits, inside)) is not None:
+                        accepted = refit
         return accepted
 
     def _torus_field(self, t: T.Torus, out: wp.array, grid: Grid | None = None, *,
