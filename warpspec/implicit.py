@@ -142,7 +142,8 @@ SETTLED_VOXELS = 0.01
 LIT_REFITS = 2
 """Most fits of a surface of revolution under lamps after the first (which takes the rays that
 meet the quadric), each from the axis of the normal lines through the rays' hits on the one
-before and only the rays it met within REJECT_DEG (while each meets more normals). The one
+before and only the rays it met within REJECT_DEG (while each meets more normals; one that
+does not is followed by one last fit to only the rays it meets within QUADRIC_DEG). The one
 taken, when it was fitted with rays it rejects, is fitted once more without them, and that fit
 replaces it when it is the start by itself too (it is fitted to fewer rays, none of them one
 that the shape taken rejects)."""
@@ -1098,7 +1099,9 @@ class ImplicitStart:
             hits, inside, _ = self.quadric.intersect(origins, dirs, lo, hi)
             use = inside
             met = 0.0
-            for _ in range(1 + LIT_REFITS):
+            strict = False
+            left = LIT_REFITS
+            while True:
                 if int(use.sum()) < R.MIN_RAYS:
                     return None
                 normals = self.scene.normals(hits)
@@ -1114,13 +1117,22 @@ class ImplicitStart:
                 residual = self._residuals(shape, hits, inside)
                 share = float(np.mean(residual[inside] <= QUADRIC_DEG))
                 if share <= met:
+                    if strict:
+                        return None
+                    # no better for leaving out the rays it missed by far: a false highlight
+                    # it misses by a few degrees may hold it, so one last fit takes only the
+                    # rays it meets within QUADRIC_DEG
+                    strict, left = True, 1
+                    self._say("a surface of revolution fitted to the highlights it meets "
+                              "within noise")
+                if left == 0:
                     return None
-                met = share
+                left -= 1
+                met = max(met, share)
                 # the next fit takes only the rays this one meets within REJECT_DEG: a shape
                 # near the truth misses the false highlights by far, and their normal lines
                 # would pull the next axis off again
-                use = inside & (residual <= REJECT_DEG)
-            return None
+                use = inside & (residual <= (QUADRIC_DEG if strict else REJECT_DEG))
 
         found = attempt(None)
         if found is None and (ring := camera_ring(origins)) is not None:
@@ -1154,6 +1166,38 @@ class ImplicitStart:
                     if shape is not None and \
                             (refit := self._accept(shape, hits, inside)) is not None:
                         accepted = refit
+        return self._without_ambiguous(accepted, fit)
+
+    def _without_ambiguous(self, accepted: R.SurfaceOfRevolution, fit: Callable
+                           ) -> R.SurfaceOfRevolution:
+        """A lit surface of revolution refitted without the rays it misses by a few degrees.
+
+        A false highlight missed by less than REJECT_DEG stays in the fit and bends the
+        profile where true highlights are few (the shoulder); fitted again from its own axis
+        with only the rays met within QUADRIC_DEG, the shape is taken when it is a start by
+        itself and leaves fewer rays between QUADRIC_DEG and REJECT_DEG. ``fit`` is
+        :meth:`_revolution`'s. Bottle-lamps seed 11, a quarter false: one false highlight
+        missed by 5.7 degrees, one true by 5.8; refitted, the false one is missed by 15.0, every
+        true one met within 2.0, and the shoulder's error falls from 1.3 voxels to 0.5.
+        """
+        origins, dirs, _, _ = self._rays
+        hits, inside = accepted.intersect(origins, dirs, self.grid.origin, self.grid.upper,
+                                          step=self.grid.spacing)
+        residual = self._residuals(accepted, hits, inside)
+        ambiguous = inside & (residual > QUADRIC_DEG) & (residual <= REJECT_DEG)
+        use = inside & (residual <= QUADRIC_DEG)
+        if not ambiguous.any() or int(use.sum()) < R.MIN_RAYS:
+            return accepted
+        self._say("a surface of revolution fitted again without the highlights it half meets")
+        shape, hits, inside = fit(use, self.scene.normals(hits),
+                                  (accepted.base, accepted.axis), tilted=False)
+        if shape is None:
+            return accepted
+        again = self._residuals(shape, hits, inside)
+        fewer = np.sum(inside & (again > QUADRIC_DEG) & (again <= REJECT_DEG)) \
+            < np.sum(ambiguous)
+        if fewer and (refit := self._accept(shape, hits, inside)) is not None:
+            return refit
         return accepted
 
     def _torus_field(self, t: T.Torus, out: wp.array, grid: Grid | None = None, *,
