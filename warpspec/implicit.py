@@ -211,6 +211,14 @@ SURROUND_STEPS = 1000
 """Perceptron steps :func:`surrounds` takes before it solves its linear program."""
 
 
+def _half_met(residual: np.ndarray) -> np.ndarray:
+    """Which normal misses (degrees) are neither met within noise nor clearly false.
+
+    Those between QUADRIC_DEG and REJECT_DEG.
+    """
+    return (residual > QUADRIC_DEG) & (residual <= REJECT_DEG)
+
+
 def level_ladder(resolution: int) -> list[int]:
     """Resolutions of the coarse-to-fine ladder: 16, 32, ... below ``resolution``, then it."""
     levels = []
@@ -1024,8 +1032,7 @@ class ImplicitStart:
         if not len(residual):
             return False
         within = np.mean(residual <= QUADRIC_DEG) >= QUADRIC_SHARE
-        within &= np.mean((residual > QUADRIC_DEG) & (residual <= REJECT_DEG)) \
-            <= QUADRIC_AMBIGUOUS
+        within &= np.mean(_half_met(residual)) <= QUADRIC_AMBIGUOUS
         return bool(within) and self._holds_points(point_distance)
 
     def _holds_points(self, point_distance: np.ndarray) -> bool:
@@ -1176,26 +1183,23 @@ class ImplicitStart:
         profile where true highlights are few (the shoulder); fitted again from its own axis
         with only the rays met within QUADRIC_DEG, the shape is taken when it is a start by
         itself and leaves fewer rays between QUADRIC_DEG and REJECT_DEG. ``fit`` is
-        :meth:`_revolution`'s. Bottle-lamps seed 11, a quarter false: one false highlight
-        missed by 5.7 degrees, one true by 5.8; refitted, the false one is missed by 15.0, every
-        true one met within 2.0, and the shoulder's error falls from 1.3 voxels to 0.5.
+        :meth:`_revolution`'s. Bottle-lamps seed 8, a quarter false: 0.17 voxel from the truth
+        end to end before, 0.13 after (0.09 and 0.04 from the clean scene's mesh).
         """
         origins, dirs, _, _ = self._rays
         hits, inside = accepted.intersect(origins, dirs, self.grid.origin, self.grid.upper,
                                           step=self.grid.spacing)
         residual = self._residuals(accepted, hits, inside)
-        ambiguous = inside & (residual > QUADRIC_DEG) & (residual <= REJECT_DEG)
+        ambiguous = int(np.sum(inside & _half_met(residual)))
         use = inside & (residual <= QUADRIC_DEG)
-        if not ambiguous.any() or int(use.sum()) < R.MIN_RAYS:
+        if not ambiguous or int(use.sum()) < R.MIN_RAYS:
             return accepted
         self._say("a surface of revolution fitted again without the highlights it half meets")
         shape, hits, inside = fit(use, self.scene.normals(hits),
                                   (accepted.base, accepted.axis), tilted=False)
         if shape is None:
             return accepted
-        again = self._residuals(shape, hits, inside)
-        fewer = np.sum(inside & (again > QUADRIC_DEG) & (again <= REJECT_DEG)) \
-            < np.sum(ambiguous)
+        fewer = np.sum(inside & _half_met(self._residuals(shape, hits, inside))) < ambiguous
         if fewer and (refit := self._accept(shape, hits, inside)) is not None:
             return refit
         return accepted
