@@ -569,8 +569,6 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
             c, a, cost = _refine_lit_axis(c, a, knot=knot, smoothness=smoothness, **data)
         if best is None or cost < best[0]:
             best = (cost, c, a)
-    from .implicit import QUADRIC_DEG, REJECT_DEG  # the start's own limits (it imports this)
-
     _, c, a = best
     heights = _knots(c, a, lo, hi, KNOT_VOXELS * voxel)
     hits, ok = _lit_hits(c, a, o, d, nrm)
@@ -591,6 +589,8 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
     frame = SurfaceOfRevolution(c, a, heights, radii)
     ph, prho, _ = frame.split(pts)
     keep = (ph >= heights[0]) & (ph <= heights[-1])
+    from .implicit import QUADRIC_DEG, REJECT_DEG  # the start's own limits (it imports this)
+
     held = weights > 0.0
     kept = np.flatnonzero(ok)[held]  # the rays whose hits the profile holds
 
@@ -600,13 +600,14 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
             normals=nrm[kept], radii=np.maximum(radii, 0.0), radius_data=rows)[0])
 
     free = refit(None)
+    free_misses = _misses(free, o, d, nrm, lo=lo, hi=hi, voxel=voxel)  # every ray's, once
     # the hits of the rays whose normals that profile meets, as weak radius data
-    met = _misses(free, o[kept], d[kept], nrm[kept], lo=lo, hi=hi, voxel=voxel) <= QUADRIC_DEG
+    met = free_misses[kept] <= QUADRIC_DEG
     hh, hr, _ = frame.split(hits[kept][met])
     held_hits = refit((hh, hr, LIT_HIT_WEIGHT * np.sqrt(weights[held][met]) / voxel))
     # from an axis a few degrees off the hits hold the profile where no surface about that
     # axis lies, and it meets fewer normals
-    misses = [_misses(s, o, d, nrm, lo=lo, hi=hi, voxel=voxel) for s in (held_hits, free)]
+    misses = (_misses(held_hits, o, d, nrm, lo=lo, hi=hi, voxel=voxel), free_misses)
     shares = [np.array([np.mean(m <= QUADRIC_DEG), np.mean(m <= REJECT_DEG)]) for m in misses]
     return held_hits if np.all(shares[0] >= shares[1]) else free
 
