@@ -98,6 +98,20 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", a, b)
 
 
+def angle_deg(cos: np.ndarray) -> np.ndarray:
+    """The angle in degrees whose cosine is ``cos``, clipped to ``[-1, 1]`` first."""
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def miss_deg(gradient: np.ndarray, normals: np.ndarray, met: np.ndarray) -> np.ndarray:
+    """The angle (degrees) between each unit ``gradient`` and its normal; 180 where not ``met``.
+
+    A ray's miss: how far the surface's normal where the ray meets it is from the normal the
+    ray asks, with 180 for a ray that does not meet the surface.
+    """
+    return np.where(met, angle_deg(_dot(gradient, normals)), 180.0)
+
+
 
 def best_fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """The least-squares plane of points: their centroid and its principal axes.

@@ -45,7 +45,7 @@ from . import quadric as Q
 from . import revolution as R
 from . import torus as T
 from ._parallel import launch_halves
-from .geometry import LIGHT_CAMERA, LIGHT_POINT, best_fit_plane, plane_frame
+from .geometry import LIGHT_CAMERA, LIGHT_POINT, angle_deg, best_fit_plane, miss_deg, plane_frame
 from .grid import Grid
 from .kernels import implicit as K
 from .normal_lines import best_axis
@@ -1377,9 +1377,7 @@ class ImplicitStart:
 
     def _residuals(self, shape, hits: np.ndarray, inside: np.ndarray) -> np.ndarray:
         """The angle (degrees) between ``shape``'s normal and each ray's at its hit (180 off it)."""
-        cos = np.clip(np.einsum("ij,ij->i", shape.gradient(hits), self.scene.normals(hits)),
-                      -1.0, 1.0)
-        return np.where(inside, np.degrees(np.arccos(cos)), 180.0)
+        return miss_deg(shape.gradient(hits), self.scene.normals(hits), inside)
 
     def _quadric_field(self, grid: Grid, out: wp.array, *, unit: float = 1.0) -> None:
         """The quadric's first-order distance on ``grid``, in units of ``unit``."""
@@ -1428,7 +1426,7 @@ class ImplicitStart:
         n = self.normals.numpy().astype(np.float64)
         kind = self.kind.numpy()
         cos = np.einsum("ij,ij->i", g, n) / np.maximum(np.linalg.norm(g, axis=1), 1e-12)
-        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        angle = angle_deg(cos)
         live = kind != K.ANCHOR_NONE
         angle[~live] = 180.0
         self.residual = angle

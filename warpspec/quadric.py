@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import angle_deg
+
 __all__ = ["Quadric", "biweight", "fit_quadric"]
 
 ROUNDS = 25
@@ -263,7 +265,7 @@ def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxe
         normals = scene.normals(anchors) if m else np.zeros((0, 3))
         g = quad.gradient(anchors)
         cos = np.einsum("ij,ij->i", g, normals) / np.maximum(np.linalg.norm(g, axis=1), 1e-300)
-        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        angle = angle_deg(cos)
         angle[~inside] = 180.0
         if round_ >= robust_from:
             # the floor of the limit falls from LIMIT_DEG to FINAL_LIMIT_DEG over the rounds:

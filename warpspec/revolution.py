@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import plane_frame
+from .geometry import angle_deg, miss_deg, plane_frame
 from .normal_lines import best_axis, first_crossing
 from .quadric import biweight
 
@@ -389,7 +389,7 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     # the angle between each line's normal and the profile's there, made without it
     cos = np.abs(snr - snh * slope) / np.sqrt(1.0 + slope * slope)
     cos = np.where(np.isfinite(cos), cos, 0.0)  # a row no other datum holds: unforeseeable
-    return radii, np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+    return radii, angle_deg(cos)
 
 
 def _point_rows(ph: np.ndarray, pr: np.ndarray, weight: float, voxel: float
@@ -509,7 +509,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
         # Tukey weights of the slopes' angles on the new profile
         current = SurfaceOfRevolution(profile.base, profile.axis, heights, radii)
         cos = np.abs(np.einsum("ij,ij->i", current.gradient(hits), outward))
-        angle = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+        angle = angle_deg(cos)
         # every line counts fully until the profile has taken its shape, then robustly
         tukey = biweight(angle, SLOPE_LIMIT_DEG)
         weights = np.where(met, tukey if round_ >= PROFILE_ROUNDS // 2 else 1.0, 0.0)
@@ -619,8 +619,7 @@ def _misses(surface: SurfaceOfRevolution, o: np.ndarray, d: np.ndarray, nrm: np.
     Measured where the ray first crosses ``surface``; 180 for a ray that misses it.
     """
     x, inside = surface.intersect(o, d, lo, hi, step=voxel)
-    cos = np.einsum("ij,ij->i", surface.gradient(x), nrm)
-    return np.where(inside, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 180.0)
+    return miss_deg(surface.gradient(x), nrm, inside)
 
 
 def _lit_hits(c: np.ndarray, a: np.ndarray, o: np.ndarray, d: np.ndarray,
