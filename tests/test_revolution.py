@@ -115,6 +115,22 @@ def test_the_bottle_starts_from_a_surface_of_revolution(name, seed, outliers, bo
     assert err < bound
 
 
+def test_by_flash_the_shape_is_fitted_again_to_the_lines_it_met():
+    """A quarter false bends a surface of revolution fitted to every flash-lit normal line:
+    on bottle seed 31 it met 62% of the normals within 3 degrees, six true ones missed by
+    4-8, two false ones by only 7.2 and 7.6, and the grid fit made instead came out 1.34 h
+    from the truth. Refitted to the lines it meets within 10 degrees (a second round), it
+    rejects exactly the false ones and is the start (resolution 64, one iteration)."""
+    synthetic = make_scene("bottle", seed=31, outliers=0.25)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert solver.fit_report.shape == "revolution"
+    assert sorted(solver.fit_report.rejected) == np.flatnonzero(synthetic.outlier_mask).tolist()
+    true = solver.fit_report.residual_deg[synthetic.inliers]
+    assert true.max() < 1.0  # 8.1 degrees from the one round's shape
+    _, err = _run(synthetic, solver, 1)
+    assert err < 0.5
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
 def test_under_lamps_false_highlights_cost_refits_not_the_shape(seed):
     """A quarter of false highlights leaves the first axis 8-15 degrees off; the refits from

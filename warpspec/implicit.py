@@ -1283,6 +1283,9 @@ class ImplicitStart:
         first, then on the shape fitted last, the hits damped), up to :data:`TORUS_ROUNDS`
         times, and again from the points' ellipsoid (:func:`points_ellipsoid`), then from
         their ring torus (:func:`warpspec.torus.points_torus`), while none gives a start.
+        After the first round only the rays the last shape meets closely give lines; by
+        flash the rounds stop when those rays are the round before's (the same lines give
+        the same shape).
         ``fit`` takes the
         lines (a point outside the surface and the inward direction of each) and returns the
         shape (with ``intersect``, ``value`` and ``gradient``) or ``None``. The shape is the
@@ -1318,11 +1321,15 @@ class ImplicitStart:
                             else first.intersect(origins, dirs, lo, hi)[:2])
             best = None
             trusted = np.ones(len(origins), dtype=bool)
-            for _ in range(1 if flash.all() else TORUS_ROUNDS):
+            last_use = None
+            for _ in range(TORUS_ROUNDS):
                 normals = self.scene.normals(hits)
                 starts = np.where(flash[:, None], origins, hits + outside * normals)
                 inward = np.where(flash[:, None], dirs, -normals)
                 use = (flash | inside) & trusted
+                if flash.all() and last_use is not None and np.array_equal(use, last_use):
+                    break  # by flash the lines stay; the same rays give the same shape
+                last_use = use
                 shape = fit(starts[use], inward[use])
                 if shape is None:
                     break
