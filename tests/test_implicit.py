@@ -361,6 +361,18 @@ def test_a_sharp_feature_the_fits_without_it_miss_comes_back_in_a_trial(seed):
     assert result.rejected == []
 
 
+def test_a_ray_that_would_come_back_alone_stays_out():
+    """The blob at a quarter false (seed 5, 64 cells): of the ten false highlights tried back
+    together, nine are missed by 34-76 degrees and the tenth (22) is met within 1.7 by the
+    fit that bent to it, with the kept rays' median miss 3% lower, so it came back. One ray
+    alone makes no feature: it stays out, and exactly the false highlights are rejected
+    (0.132 h from the clean result end to end before, 0.050 after)."""
+    synthetic = make_scene("blob", seed=5, outliers=0.25)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert sorted(solver.fit_report.rejected.tolist()) == \
+        np.flatnonzero(synthetic.outlier_mask).tolist()
+
+
 def test_mesh_pieces_far_from_the_data_are_dropped():
     grid = Grid(origin=np.zeros(3), spacing=0.1, shape=(31, 31, 31))
     x, y, z = grid.coordinates()
