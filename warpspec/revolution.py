@@ -622,6 +622,17 @@ def _misses(surface: SurfaceOfRevolution, o: np.ndarray, d: np.ndarray, nrm: np.
     return miss_deg(surface.gradient(x), nrm, inside)
 
 
+def lit_hit_distance(surface: SurfaceOfRevolution, o: np.ndarray, d: np.ndarray,
+                     nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far each ray's own hit lies from ``surface``, and whether the ray has one.
+
+    A ray's hit is where its normal line meets the surface's axis (``_lit_hits``); the
+    distance is ``surface``'s first-order distance there (world units).
+    """
+    hits, ok = _lit_hits(surface.base, surface.axis, o, d, nrm)
+    return np.abs(surface.value(hits)), ok
+
+
 def _lit_hits(c: np.ndarray, a: np.ndarray, o: np.ndarray, d: np.ndarray,
               nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The point of each ray whose normal line meets the axis, and whether there is one.
