@@ -112,7 +112,6 @@ def miss_deg(gradient: np.ndarray, normals: np.ndarray, met: np.ndarray) -> np.n
     return np.where(met, angle_deg(_dot(gradient, normals)), 180.0)
 
 
-
 def best_fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """The least-squares plane of points: their centroid and its principal axes.
 

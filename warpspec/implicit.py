@@ -1319,8 +1319,8 @@ class ImplicitStart:
         times, and again from the points' ellipsoid (:func:`points_ellipsoid`), then from
         their ring torus (:func:`warpspec.torus.points_torus`), while none gives a start.
         After the first round only the rays the last shape meets closely give lines; by
-        flash the rounds stop when those rays are the round before's (the same lines give
-        the same shape).
+        flash the rounds stop when those rays were fitted in a round before (the same lines
+        give the same shape).
         ``fit`` takes the
         lines (a point outside the surface and the inward direction of each) and returns the
         shape (with ``intersect``, ``value`` and ``gradient``) or ``None``. The shape is the
@@ -1356,15 +1356,15 @@ class ImplicitStart:
                             else first.intersect(origins, dirs, lo, hi)[:2])
             best = None
             trusted = np.ones(len(origins), dtype=bool)
-            last_use = None
+            tried: set[bytes] = set()
             for _ in range(TORUS_ROUNDS):
                 normals = self.scene.normals(hits)
                 starts = np.where(flash[:, None], origins, hits + outside * normals)
                 inward = np.where(flash[:, None], dirs, -normals)
                 use = (flash | inside) & trusted
-                if flash.all() and last_use is not None and np.array_equal(use, last_use):
-                    break  # by flash the lines stay; the same rays give the same shape
-                last_use = use
+                if flash.all() and use.tobytes() in tried:
+                    break  # by flash the lines stay; rays fitted before give a shape tried
+                tried.add(use.tobytes())
                 shape = fit(starts[use], inward[use])
                 if shape is None:
                     break
