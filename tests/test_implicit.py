@@ -349,6 +349,32 @@ def test_a_true_normal_at_a_corner_of_the_hits_hull_is_kept_by_cross_validation(
     assert 1 not in {r["index"] for r in result.rejected}
 
 
+def _corners(xy: np.ndarray) -> np.ndarray:
+    """``ImplicitStart._on_hull`` of every ray, their hits at ``xy`` in the plane z = 0."""
+    from warpspec.implicit import ImplicitStart
+
+    start = ImplicitStart.__new__(ImplicitStart)
+    start.m, start._one_side, start.plane = len(xy), True, (np.zeros(3), np.array([0, 0, 1.0]))
+    start.kind = wp.array(np.full(len(xy), K.ANCHOR_CROSSING, dtype=np.int32), dtype=int)
+    start.anchor = wp.array(np.c_[xy, np.zeros(len(xy))].astype(np.float32), dtype=wp.vec3)
+    return start._on_hull(np.arange(len(xy)))
+
+
+def test_a_hull_corner_counts_unless_a_hit_is_nearer_than_the_hits_median_spacing():
+    """Hits spread over a square with its four corners: each corner is extrapolated to by a
+    fit without it. A hit put 0.01 from one corner (the spacing is about 0.1) takes that corner
+    and itself out: a fit without either is carried there from the other. Hits on a line are
+    all corners."""
+    rng = np.random.default_rng(3)
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    xy = np.concatenate([square, rng.uniform(0.15, 0.85, (60, 2))])
+    assert _corners(xy).tolist() == [True] * 4 + [False] * 60
+    near = _corners(np.concatenate([xy, [[0.01, 0.0]]]))
+    assert near.tolist() == [False, True, True, True] + [False] * 61
+    line = np.c_[np.linspace(0.0, 1.0, 9), np.zeros(9)]
+    assert _corners(line).all()
+
+
 def test_a_hull_corner_with_a_near_neighbour_is_cross_validated_as_an_inner_ray():
     """The point-lit dome at a quarter false (seed 6, 64 cells): false highlight 5 meets the
     dome 0.05 from a true one, at a corner of a hull that stops short of the patch's edge. The
