@@ -1253,35 +1253,33 @@ class ImplicitStart:
         origins, dirs, _, _ = self._rays
         hits, inside = accepted.intersect(origins, dirs, self.grid.origin, self.grid.upper,
                                           step=self.grid.spacing)
-        before = hits
         residual = self._residuals(accepted, hits, inside)
         ambiguous = int(np.sum(inside & _half_met(residual)))
         use = inside & (residual <= QUADRIC_DEG)
         if not ambiguous or int(use.sum()) < R.MIN_RAYS:
             return accepted
         self._say("a surface of revolution fitted again without the highlights it half meets")
-        shape, hits, inside = fit(use, self.scene.normals(hits),
-                                  (accepted.base, accepted.axis), tilted=False)
+        normals = self.scene.normals(hits)
+        shape, hits, inside = fit(use, normals, (accepted.base, accepted.axis), tilted=False)
         if shape is None:
             return accepted
-        if self._hits_off(shape, hits, use) > self._hits_off(accepted, before, use) \
-                + HIT_SLACK_VOXELS:
+        if self._hits_off(shape, self.scene.normals(hits), use) > self._hits_off(
+                accepted, normals, use) + HIT_SLACK_VOXELS:
             return accepted  # the refit lost the body the left-out rays held
         fewer = np.sum(inside & _half_met(self._residuals(shape, hits, inside))) < ambiguous
         if fewer and (refit := self._accept(shape, hits, inside)) is not None:
             return refit
         return accepted
 
-    def _hits_off(self, shape: R.SurfaceOfRevolution, hits: np.ndarray,
+    def _hits_off(self, shape: R.SurfaceOfRevolution, normals: np.ndarray,
                   rays: np.ndarray) -> float:
         """How far ``rays``' own hits lie from a lit ``shape``: the 90th percentile, voxels.
 
-        A ray's own hit is where its normal line (through its crossing ``hits`` with the
-        shape, where the normal is asked) meets the shape's axis; 0 without any.
+        A ray's own hit is where its normal line (the normal asked where it crosses the
+        shape, ``normals`` of every ray) meets the shape's axis; 0 without any.
         """
         origins, dirs, _, _ = self._rays
-        off, has_hit = R.lit_hit_distance(shape, origins[rays], dirs[rays],
-                                          self.scene.normals(hits)[rays])
+        off, has_hit = R.lit_hit_distance(shape, origins[rays], dirs[rays], normals[rays])
         if not has_hit.any():
             return 0.0
         return float(np.percentile(off[has_hit], 90)) / self.grid.spacing
