@@ -9,7 +9,12 @@ import warpspec as ws
 from warpspec import quadric as Q
 from warpspec.geometry import crop_to_data_hull, crop_to_unwrapped_hull
 from warpspec.grid import Grid
-from warpspec.implicit import first_guess, level_ladder, ray_convergence
+from warpspec.implicit import (
+    ImplicitStart,
+    first_guess,
+    level_ladder,
+    ray_convergence,
+)
 from warpspec.kernels import implicit as K
 from warpspec.mesh import is_open, supported_components, triangulate, vertex_components
 from warpspec.solver import initial_plane
@@ -351,8 +356,6 @@ def test_a_true_normal_at_a_corner_of_the_hits_hull_is_kept_by_cross_validation(
 
 def _corners(xy: np.ndarray) -> np.ndarray:
     """``ImplicitStart._on_hull`` of every ray, their hits at ``xy`` in the plane z = 0."""
-    from warpspec.implicit import ImplicitStart
-
     start = ImplicitStart.__new__(ImplicitStart)
     start.m, start._one_side, start.plane = len(xy), True, (np.zeros(3), np.array([0, 0, 1.0]))
     start.kind = wp.array(np.full(len(xy), K.ANCHOR_CROSSING, dtype=np.int32), dtype=int)
@@ -383,6 +386,28 @@ def test_a_hull_corner_with_a_near_neighbour_is_cross_validated_as_an_inner_ray(
     there from its neighbour, as to an inner ray: past CV_DEG it is rejected, and exactly the
     false highlights are (0.06 h worse than the clean scene)."""
     synthetic = make_scene("point-light", seed=6, outliers=0.25)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert sorted(solver.fit_report.rejected.tolist()) == \
+        np.flatnonzero(synthetic.outlier_mask).tolist()
+
+
+def test_a_lone_miss_is_one_past_the_floor_and_twice_every_other():
+    """Cross-validation's gap rule: the worst miss counts when it is past CV_FLOOR_DEG and
+    CV_GAP times the next (rays not compared, negative, never count)."""
+    lone = ImplicitStart._lone_miss
+    assert lone(np.array([1.0, 7.8, 3.1, -1.0])).tolist() == [False, True, False, False]
+    assert not lone(np.array([1.0, 7.8, 4.0])).any()  # within twice the next
+    assert not lone(np.array([0.5, 4.5, 1.0])).any()  # under the floor
+    assert lone(np.array([-1.0, 30.0, -1.0])).tolist() == [False, True, False]
+    assert not lone(np.array([9.0])).any()
+
+
+def test_a_false_highlight_that_the_others_foresee_closely_is_rejected_under_cv_deg():
+    """The blob at a tenth false (seed 1, 64 cells): fits made without each ray miss the true
+    normals by at most 3.1 degrees (median 1.0), and false highlight 30 by 7.8, under CV_DEG,
+    so it was kept (0.105 h worse than the clean scene). Missed by more than twice any other,
+    it is rejected, and exactly the false highlights are."""
+    synthetic = make_scene("blob", seed=1, outliers=0.1)
     solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
     assert sorted(solver.fit_report.rejected.tolist()) == \
         np.flatnonzero(synthetic.outlier_mask).tolist()
@@ -773,8 +798,6 @@ def test_a_closed_form_shape_holds_four_points_in_five():
     """The points' test of a closed-form start: four points in five within 1/64 of the
     domain's size, so one noisy point of six passes and two do not, at any resolution."""
     from types import SimpleNamespace
-
-    from warpspec.implicit import ImplicitStart
 
     stub = SimpleNamespace(grid=SimpleNamespace(origin=np.zeros(3), upper=np.full(3, 0.64)))
     stub._holds_points = lambda distance: ImplicitStart._holds_points(stub, distance)
