@@ -405,7 +405,7 @@ def test_a_lone_miss_is_one_past_the_floor_and_twice_every_other():
 def test_a_false_highlight_that_the_others_foresee_closely_is_rejected_under_cv_deg():
     """The blob at a tenth false (seed 1, 64 cells): fits made without each ray miss the true
     normals by at most 3.1 degrees (median 1.0), and false highlight 30 by 7.8, under CV_DEG,
-    so it was kept (0.105 h worse than the clean scene). Missed by more than twice any other,
+    so it was kept (0.107 h worse than the clean scene). Missed by more than twice any other,
     it is rejected, and exactly the false highlights are."""
     synthetic = make_scene("blob", seed=1, outliers=0.1)
     solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
