@@ -125,10 +125,10 @@ CV_GAP = 2.0
 made without each ray foresee the rest closely, a false normal stands alone. The blob at a
 tenth false, seed 1: false highlight 30 was missed by 7.8 degrees, the true ones by at most
 3.1 (median 1.0); kept, the blob was 0.107 h worse than the clean scene, rejected 0.022
-(seed 102: 8.3 against 3.75, +0.114 -> +0.025 h). Not a limit from the spread of the misses (three robust
-standard deviations, at least CV_FLOOR_DEG): the free-form patch's true misses have a long
-tail, and seed 1 at a tenth false went from 0.220 to 0.328 h, clean seed 4 from 0.060 to
-0.090."""
+(seed 102: 8.3 against 3.75, +0.114 -> +0.025 h). Not a limit from the spread of the misses
+(three robust standard deviations, at least CV_FLOOR_DEG): the free-form patch's true misses
+have a long tail, and seed 1 at a tenth false went from 0.220 to 0.328 h, clean seed 4 from
+0.060 to 0.090."""
 CV_NEAR = 1.0
 """A corner of the kept hits' hull whose nearest other hit is no farther than this share of the
 hits' median distance to their nearest is cross-validated as an inner ray (CV_DEG): a fit
