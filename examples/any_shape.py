@@ -19,7 +19,9 @@ Columns of the markdown table it prints:
 - watertight: whether the mesh is closed (closed scenes only);
 - Euler: the mesh's Euler number / the truth's;
 - vs clean: for a noise or outlier variant, the symmetric mean distance (h) between its mesh
-  and the clean scene's mesh (same seed);
+  and the clean scene's mesh (same seed), open scenes cropped to the clean scene's hull;
+- excess: for a variant, its symmetric mean distance to the truth (h) minus the clean
+  scene's: how much the noise or the false highlights cost against the truth;
 - misses: rays that do not meet the final surface (the solver's count after the last
   iteration); time: seconds for the reconstruction alone (kernels compiled beforehand).
 
@@ -32,6 +34,11 @@ Examples:
     python examples/any_shape.py --outliers 0.1 0.25 --noise 0.5 --json rows.json
     python examples/any_shape.py --scene freeform --highlights 30 60 120 240
     python examples/any_shape.py --write-scenes examples/scenes      # the example files
+    python examples/any_shape.py --summary-of rows.json more.json      # the README's table
+
+``--summary`` (or ``--summary-of`` saved rows) prints one row per scene: means and worsts over
+the seeds, the closed meshes that are watertight with the truth's Euler number, and each
+variant's worst excess over the clean scene (and how many seeds exceed 0.1 h).
 """
 
 from __future__ import annotations
@@ -46,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 import warpspec
-from warpspec.errors import ReconstructionError, SceneError
+from warpspec.errors import InputError, ReconstructionError, SceneError
 from warpspec.evaluate import evaluate, truth_region
 from warpspec.synthetic import SyntheticScene, make_scene
 
@@ -69,7 +76,12 @@ PLY_OPTIONS = {
     "point-light": {"resolution": 32},
 }
 COLUMNS = ("scene", "seed", "variant", "highlights", "points", "truth->mesh (h)",
-           "mesh->truth (h)", "watertight", "Euler", "vs clean (h)", "misses", "time (s)")
+           "mesh->truth (h)", "watertight", "Euler", "vs clean (h)", "excess (h)", "misses",
+           "time (s)")
+
+
+ACCEPT_EXCESS = 0.1
+"""The excess over the clean scene (h) a false-highlight variant should stay within."""
 
 
 def _variants(noise: list[float], outliers: list[float]) -> list[tuple[str, float, float]]:
@@ -100,13 +112,12 @@ def run_one(synthetic: SyntheticScene, *, resolution: int, iterations: int,
         row["error"] = "empty mesh"
         return row, None, h
     keep = synthetic.inliers
-    region = None if synthetic.closed else truth_region(synthetic.truth_points[keep],
-                                                        synthetic.points)
+    region = scoring_region(synthetic)
     try:
         ev = evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
                       specular_points=synthetic.truth_points[keep],
                       true_normals=synthetic.truth_normals[keep], samples=samples)
-    except SceneError as exc:
+    except InputError as exc:
         row["error"] = str(exc)
         return row, mesh, h
     row.update(completeness=ev.completeness.mean / h, accuracy=ev.accuracy.mean / h,
@@ -115,22 +126,76 @@ def run_one(synthetic: SyntheticScene, *, resolution: int, iterations: int,
     return row, mesh, h
 
 
+def scoring_region(synthetic: SyntheticScene):
+    """The region an open scene is scored over (the inliers' hull), ``None`` for a closed one."""
+    if synthetic.closed:
+        return None
+    return truth_region(synthetic.truth_points[synthetic.inliers], synthetic.points)
+
+
+def _symmetric(row: dict) -> float | None:
+    if "completeness" not in row:
+        return None
+    return 0.5 * (row["completeness"] + row["accuracy"])
+
+
+def _label(row: dict) -> str:
+    """The scene's name, with the highlights asked for where they were (``--highlights``)."""
+    count = row.get("requested")
+    return row["scene"] if count is None else f"{row['scene']}, {count} highlights"
+
+
+def summary(rows: list[dict]) -> list[str]:
+    """The per-scene summary table (markdown lines) of ``rows``: the clean rows' means and
+    worsts over the seeds, and each variant's worst excess over the clean scene."""
+    variants = list(dict.fromkeys(r["variant"] for r in rows if r["variant"] != "clean"))
+    head = ["scene", "seeds", "truth->mesh (h), mean / worst", "mesh->truth (h), mean / worst",
+            "watertight, right Euler", *(f"excess (h), worst: {v}" for v in variants)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key in dict.fromkeys(_label(r) for r in rows):
+        mine = [r for r in rows if _label(r) == key]
+        clean = [r for r in mine if r["variant"] == "clean"]
+        scored = [r for r in clean if "completeness" in r]
+        cells = [key, str(len(clean))]
+        for key in ("completeness", "accuracy"):
+            values = [r[key] for r in scored]
+            cells.append(f"{np.mean(values):.3f} / {np.max(values):.3f}" if values else "-")
+        if clean and clean[0]["closed"]:
+            good = sum(bool(r.get("watertight")) and r.get("euler") == r["euler_expected"]
+                       for r in scored)
+            cells.append(f"{good} of {len(clean)}")
+        else:
+            cells.append("open")
+        for v in variants:
+            values = [r["excess"] for r in mine if r["variant"] == v
+                      and r.get("excess") is not None]
+            failed = sum(r["variant"] == v and "error" in r for r in mine)
+            over = sum(v > ACCEPT_EXCESS for v in values)
+            text = f"{_fmt(max(values), '+.3f')} ({over} over)" if values else "-"
+            cells.append(text + (f" ({failed} failed)" if failed else ""))
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def _fmt(value, spec: str = ".3f") -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "-"
+    if isinstance(value, float):
+        value = round(value, 3) + 0.0  # no "-0.000"
     return format(value, spec)
 
 
 def table_row(row: dict) -> str:
     """One markdown row of :data:`COLUMNS`."""
     if "error" in row and "completeness" not in row:
-        tail = [f"failed: {row['error']}", "-", "-", "-", "-", _fmt(row.get("misses"), "d"),
+        tail = [f"failed: {row['error']}", "-", "-", "-", "-", "-", _fmt(row.get("misses"), "d"),
                 _fmt(row.get("time"), ".1f")]
     else:
         watertight = ("yes" if row["watertight"] else "no") if row["closed"] else "-"
         tail = [_fmt(row["completeness"]), _fmt(row["accuracy"]), watertight,
                 f"{row['euler']} / {_fmt(row['euler_expected'], 'd')}",
-                _fmt(row.get("vs_clean")), _fmt(row.get("misses"), "d"), _fmt(row["time"], ".1f")]
+                _fmt(row.get("vs_clean")), _fmt(row.get("excess"), "+.3f"),
+                _fmt(row.get("misses"), "d"), _fmt(row["time"], ".1f")]
     cells = [row["scene"], str(row["seed"]), row["variant"], str(row["highlights"]),
              str(row["points"]), *tail]
     return "| " + " | ".join(cells) + " |"
@@ -170,12 +235,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=20_000,
                         help="evaluation samples per mesh (default 20000)")
     parser.add_argument("--device", default=None, help="Warp device (default: CUDA if seen)")
+    parser.add_argument("--summary", action="store_true",
+                        help="also print the per-scene summary table after the rows")
+    parser.add_argument("--summary-of", nargs="+", type=Path, default=None, metavar="FILE",
+                        help="only print the summary table of rows saved with --json (several "
+                             "files are merged), and stop")
     parser.add_argument("--json", type=Path, default=None, metavar="FILE",
                         help="also write the rows to this file (.json)")
     parser.add_argument("--write-scenes", type=Path, default=None, metavar="DIR",
                         help="only write the shape-class scenes (first seed) into DIR, with "
                              "their truth and a coarse truth mesh, and stop")
     args = parser.parse_args(argv)
+    if args.summary_of is not None:
+        rows = []
+        for path in args.summary_of:
+            try:
+                rows += json.loads(path.read_text())
+            except (OSError, ValueError) as exc:
+                parser.error(f"--summary-of: cannot read rows from {str(path)!r}: {exc}")
+        print("\n".join(summary(rows)))
+        return 0
     if args.write_scenes is not None:
         write_scenes(args.write_scenes, args.seeds[0] if args.seeds else 0)
         return 0
@@ -203,21 +282,31 @@ def main(argv: list[str] | None = None) -> int:
         counts = args.highlights if name == "freeform" and args.highlights else [None]
         for seed, count in ((s, c) for s in seeds for c in counts):
             options = {} if count is None else {"highlights": count}
-            clean_mesh = None
+            clean_mesh = clean_score = clean_region = None
             for label, noise, outliers in _variants(args.noise, args.outliers):
                 synthetic = make_scene(name, noise=noise, outliers=outliers, seed=seed,
                                        **options)
                 row, mesh, h = run_one(synthetic, resolution=args.resolution,
                                        iterations=args.iterations, device=args.device,
                                        samples=args.samples)
-                row.update(scene=name, seed=seed, variant=label)
+                row.update(scene=name, seed=seed, variant=label, requested=count)
                 if label == "clean":
-                    clean_mesh = mesh
+                    clean_mesh, clean_score = mesh, _symmetric(row)
+                    clean_region = scoring_region(synthetic)
                 elif mesh is not None and clean_mesh is not None:
-                    ev = evaluate(mesh, clean_mesh, spacing=h, samples=args.samples)
-                    row["vs_clean"] = ev.chamfer / h
+                    try:
+                        ev = evaluate(mesh, clean_mesh, spacing=h, region=clean_region,
+                                      samples=args.samples)
+                        row["vs_clean"] = ev.chamfer / h
+                    except InputError:  # the crop keeps nothing of one mesh
+                        row["vs_clean"] = None
+                    if _symmetric(row) is not None and clean_score is not None:
+                        row["excess"] = _symmetric(row) - clean_score
                 rows.append(row)
                 print(table_row(row), flush=True)
+    if args.summary:
+        print()
+        print("\n".join(summary(rows)))
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1, default=_json_default) + "\n")
     return 0

@@ -6,6 +6,7 @@ fails them (on these grids the runs land at 0.002-0.04 voxel and 0.3-1.9 degrees
 """
 
 import importlib
+import json
 import sys
 from pathlib import Path
 
@@ -111,3 +112,45 @@ def test_examples_write_their_figures(tmp_path, capsys):
     for row in ("| octant-paper |", "| octant |", "| car-window-paper |", "| car-window |"):
         assert row in out
     assert "completeness (truth to mesh)" in out
+
+
+def _row(scene, seed, variant, score, **extra):
+    return {"scene": scene, "seed": seed, "variant": variant, "closed": scene == "sphere",
+            "euler_expected": 2, "euler": 2, "watertight": True, "completeness": score,
+            "accuracy": score, **extra}
+
+
+def test_any_shape_summary_takes_each_variant_worst_excess_per_scene():
+    any_shape = _load("any_shape")
+    rows = [_row("sphere", 0, "clean", 0.1), _row("sphere", 1, "clean", 0.3, euler=0),
+            _row("sphere", 0, "outliers 0.1", 0.1, excess=0.02),
+            _row("sphere", 1, "outliers 0.1", 0.5, excess=0.2),
+            _row("patch", 0, "clean", 0.2, requested=30),
+            _row("patch", 0, "clean", 0.4, requested=60),
+            {"scene": "patch", "seed": 0, "variant": "outliers 0.1", "requested": 60,
+             "error": "no surface"}]
+    lines = any_shape.summary(rows)
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
+    assert cells[0] == ["sphere", "2", "0.200 / 0.300", "0.200 / 0.300", "1 of 2",
+                        "+0.200 (1 over)"]
+    assert cells[1][:5] == ["patch, 30 highlights", "1", "0.200 / 0.200", "0.200 / 0.200",
+                            "open"]
+    assert cells[2][0] == "patch, 60 highlights" and cells[2][-1] == "- (1 failed)"
+
+
+def test_any_shape_scores_a_variant_against_its_clean_scene(capsys, tmp_path):
+    any_shape = _load("any_shape")
+    out = tmp_path / "rows.json"
+    assert any_shape.main(["--scene", "octant", "--outliers", "0.25", "--resolution", "24",
+                           "--iterations", "20", "--samples", "2000", "--summary",
+                           "--json", str(out)]) == 0
+    rows = {r["variant"]: r for r in json.loads(out.read_text())}
+    clean, false = rows["clean"], rows["outliers 0.25"]
+    score = 0.5 * (false["completeness"] + false["accuracy"])
+    assert false["excess"] == pytest.approx(score - 0.5 * (clean["completeness"]
+                                                           + clean["accuracy"]))
+    assert 0.0 <= false["vs_clean"] < 0.5
+    printed = capsys.readouterr().out
+    assert "| octant | 1 |" in printed
+    assert any_shape.main(["--summary-of", str(out)]) == 0
+    assert "| octant | 1 |" in capsys.readouterr().out
