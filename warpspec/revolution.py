@@ -29,7 +29,6 @@ it does, as it would take a quadric.
 from __future__ import annotations
 
 import functools
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -219,16 +218,13 @@ def _finite_or_none(fit: Callable) -> Callable:
     """A fit run with numerical warnings silenced; a shape with a profile not finite: ``None``.
 
     Asked of data that no surface of revolution explains (a blob seen all around), the
-    profile's slopes can grow without bound and its banded system turn singular: that shape
-    is no answer, and the warnings are no news to a user.
+    profile's slopes can grow without bound and its banded system turn singular (the
+    profile's radii are NaN then): that shape is no answer, and the warnings are no news to
+    a user.
     """
     @functools.wraps(fit)
     def quiet(*args, **kwargs):
-        from scipy.sparse.linalg import MatrixRankWarning
-
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
-                warnings.catch_warnings():
-            warnings.simplefilter("ignore", MatrixRankWarning)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             out = fit(*args, **kwargs)
         shape = out[0] if isinstance(out, tuple) else out
         if shape is not None and not np.all(np.isfinite(shape.radii)):
@@ -333,19 +329,17 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
             height: the row's out-of-sample miss.
 
     Every row touches at most four neighbouring knots, so the normal equations are banded
-    and solved sparse (scipy's ``spsolve``): the knots are a twentieth of a voxel apart
-    (1,700 at 64 cells), too many for a dense least-squares solve 20 times a fit.
+    (seven diagonals) and solved by a banded Cholesky factorisation: the knots are a
+    twentieth of a voxel apart (1,700 at 64 cells), and an axis' refinement solves thousands
+    of profiles. The band is assembled directly, without a sparse matrix.
     """
-    from scipy.sparse import csr_matrix, diags, vstack
-    from scipy.sparse.linalg import spsolve
+    from scipy.linalg import cho_solve_banded, cholesky_banded
 
     count = len(heights)
     step = heights[1] - heights[0]
     k = step / scale
     rows = count - 3
     weight = np.sqrt(smoothness * k) / k**3 / scale * (np.ones(rows) if bend is None else bend)
-    smooth = diags([-weight, 3 * weight, -3 * weight, weight], [0, 1, 2, 3],
-                   shape=(rows, count))
 
     def cells(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         u = np.clip((h - heights[0]) / step, 0.0, count - 1 - 1e-9)
@@ -357,30 +351,48 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     i, t = cells(vh)
     j, _ = cells(sh)
     n_v, n_s = len(vh), len(sh)
-    r = np.r_[np.arange(n_v), np.arange(n_v), n_v + np.arange(n_s), n_v + np.arange(n_s)]
-    c = np.r_[i, i + 1, j, j + 1]
-    v = np.r_[vw * (1.0 - t), vw * t, -sw * snr / step, sw * snr / step]
-    A = csr_matrix((v, (r, c)), shape=(n_v + n_s, count))
+    # every data row has two entries, at knots c and c + 1: (left, right) and its target
+    first = np.r_[i, j]
+    left = np.r_[vw * (1.0 - t), -sw * snr / step]
+    right = np.r_[vw * t, sw * snr / step]
     b = np.r_[vw * vr, -sw * snh]
-    M = vstack([A, smooth]).tocsc()
-    normal = (M.T @ M).tocsc()
-    radii = spsolve(normal, M.T @ np.r_[b, np.zeros(rows)])
+    # the normal equations in upper banded form: band[3 - d, c + d] holds N[c, c + d]
+    band = np.zeros((4, count))
+    np.add.at(band[3], first, left * left)
+    np.add.at(band[3], first + 1, right * right)
+    np.add.at(band[2], first + 1, left * right)
+    stencil = np.array([-1.0, 3.0, -3.0, 1.0])  # the third difference's row
+    w2 = weight * weight
+    for p in range(4):
+        for q in range(p, 4):
+            band[3 - (q - p), q: q + rows] += w2 * stencil[p] * stencil[q]
+    rhs = np.zeros(count)
+    np.add.at(rhs, first, left * b)
+    np.add.at(rhs, first + 1, right * b)
+    factor = None
+    if np.all(np.isfinite(band)) and np.all(np.isfinite(rhs)):
+        try:
+            factor = cholesky_banded(band, check_finite=False)
+        except np.linalg.LinAlgError:
+            pass
+    if factor is None:  # overflowing slopes or a singular system: no profile (NaN radii)
+        radii = np.full(count, np.nan)
+        return radii, (np.full(n_s, np.nan) if leave_out else np.full(n_v + n_s, np.nan))
+    radii = cho_solve_banded((factor, False), rhs, check_finite=False)
+    fitted = left * radii[first] + right * radii[first + 1]
     if not leave_out:
-        return radii, A @ radii - b
+        return radii, fitted - b
     # each slope row left out in turn, by the Sherman-Morrison update of the normal
     # equations: x_-i = x + z_i (a_i . x - b_i) / (1 - a_i . z_i), z_i = N^-1 a_i
-    from scipy.sparse.linalg import splu
-
     if not n_s:
         return radii, np.zeros(0)
-    rows_s = A[n_v:].toarray()
-    try:
-        z = splu(normal).solve(rows_s.T.copy())  # (count, n_s)
-    except RuntimeError:  # singular: the radii are not finite either, and no fit is made
-        return radii, np.full(n_s, np.nan)
-    lever = np.einsum("ij,ji->i", rows_s, z)
-    resid = rows_s @ radii - b[n_v:]
     cols = np.arange(n_s)
+    rows_s = np.zeros((n_s, count))
+    rows_s[cols, j] = left[n_v:]
+    rows_s[cols, j + 1] = right[n_v:]
+    z = cho_solve_banded((factor, False), rows_s.T.copy(), check_finite=False)  # (count, n_s)
+    lever = np.einsum("ij,ji->i", rows_s, z)
+    resid = fitted[n_v:] - b[n_v:]
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = resid / (1.0 - lever)
         left = radii[j] + z[j, cols] * shift
