@@ -147,7 +147,11 @@ class SurfaceOfRevolution:
         return h, rho, e
 
     def slopes(self) -> np.ndarray:
-        """``r'`` at each knot."""
+        """``r'`` at each knot (computed once: a ray trace asks for it at every step)."""
+        return self._slopes
+
+    @functools.cached_property
+    def _slopes(self) -> np.ndarray:
         return np.gradient(self.radii, self.heights)
 
     def value(self, x: np.ndarray) -> np.ndarray:
