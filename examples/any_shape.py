@@ -157,8 +157,8 @@ def summary(rows: list[dict]) -> list[str]:
         clean = [r for r in mine if r["variant"] == "clean"]
         scored = [r for r in clean if "completeness" in r]
         cells = [key, str(len(clean))]
-        for key in ("completeness", "accuracy"):
-            values = [r[key] for r in scored]
+        for measure in ("completeness", "accuracy"):
+            values = [r[measure] for r in scored]
             cells.append(f"{np.mean(values):.3f} / {np.max(values):.3f}" if values else "-")
         if clean and clean[0]["closed"]:
             good = sum(bool(r.get("watertight")) and r.get("euler") == r["euler_expected"]
@@ -166,11 +166,11 @@ def summary(rows: list[dict]) -> list[str]:
             cells.append(f"{good} of {len(clean)}")
         else:
             cells.append("open")
-        for v in variants:
-            values = [r["excess"] for r in mine if r["variant"] == v
+        for variant in variants:
+            values = [r["excess"] for r in mine if r["variant"] == variant
                       and r.get("excess") is not None]
-            failed = sum(r["variant"] == v and "error" in r for r in mine)
-            over = sum(v > ACCEPT_EXCESS for v in values)
+            failed = sum(r["variant"] == variant and "error" in r for r in mine)
+            over = sum(x > ACCEPT_EXCESS for x in values)
             text = f"{_fmt(max(values), '+.3f')} ({over} over)" if values else "-"
             cells.append(text + (f" ({failed} failed)" if failed else ""))
         lines.append("| " + " | ".join(cells) + " |")
