@@ -355,24 +355,24 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     i, t = cells(vh)
     j, _ = cells(sh)
     n_v, n_s = len(vh), len(sh)
-    # every data row has two entries, at knots c and c + 1: (left, right) and its target
+    # every data row has two entries, at knots c and c + 1 (lower, upper), and a target
     first = np.r_[i, j]
-    left = np.r_[vw * (1.0 - t), -sw * snr / step]
-    right = np.r_[vw * t, sw * snr / step]
+    lower = np.r_[vw * (1.0 - t), -sw * snr / step]
+    upper = np.r_[vw * t, sw * snr / step]
     b = np.r_[vw * vr, -sw * snh]
     # the normal equations in upper banded form: band[3 - d, c + d] holds N[c, c + d]
     band = np.zeros((4, count))
-    np.add.at(band[3], first, left * left)
-    np.add.at(band[3], first + 1, right * right)
-    np.add.at(band[2], first + 1, left * right)
+    np.add.at(band[3], first, lower * lower)
+    np.add.at(band[3], first + 1, upper * upper)
+    np.add.at(band[2], first + 1, lower * upper)
     stencil = np.array([-1.0, 3.0, -3.0, 1.0])  # the third difference's row
     w2 = weight * weight
     for p in range(4):
         for q in range(p, 4):
             band[3 - (q - p), q: q + rows] += w2 * stencil[p] * stencil[q]
     rhs = np.zeros(count)
-    np.add.at(rhs, first, left * b)
-    np.add.at(rhs, first + 1, right * b)
+    np.add.at(rhs, first, lower * b)
+    np.add.at(rhs, first + 1, upper * b)
     factor = None
     if np.all(np.isfinite(band)) and np.all(np.isfinite(rhs)):
         try:
@@ -383,7 +383,7 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
         radii = np.full(count, np.nan)
         return radii, (np.full(n_s, np.nan) if leave_out else np.full(n_v + n_s, np.nan))
     radii = cho_solve_banded((factor, False), rhs, check_finite=False)
-    fitted = left * radii[first] + right * radii[first + 1]
+    fitted = lower * radii[first] + upper * radii[first + 1]
     if not leave_out:
         return radii, fitted - b
     # each slope row left out in turn, by the Sherman-Morrison update of the normal
@@ -392,8 +392,8 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
         return radii, np.zeros(0)
     cols = np.arange(n_s)
     rows_s = np.zeros((n_s, count))
-    rows_s[cols, j] = left[n_v:]
-    rows_s[cols, j + 1] = right[n_v:]
+    rows_s[cols, j] = lower[n_v:]
+    rows_s[cols, j + 1] = upper[n_v:]
     z = cho_solve_banded((factor, False), rows_s.T.copy(), check_finite=False)  # (count, n_s)
     lever = np.einsum("ij,ji->i", rows_s, z)
     resid = fitted[n_v:] - b[n_v:]
