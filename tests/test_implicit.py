@@ -552,22 +552,27 @@ def test_anchors_all_round_an_axis_are_not_unwrapped():
     assert np.allclose(np.sort(c[:, 2])[[0, -1]], [-0.55, 0.55], atol=0.06)
 
 
+def _scored(synthetic, mesh, h: float):
+    """``mesh`` against the truth, over the hull of the inliers' true hits and the points."""
+    from warpspec.evaluate import evaluate, truth_region
+
+    region = truth_region(synthetic.truth_points[synthetic.inliers], synthetic.points)
+    return evaluate(mesh, synthetic.truth_mesh(sections=64), spacing=h, region=region,
+                    samples=5000)
+
+
 @pytest.mark.parametrize("seed", [0, 3])
 def test_false_highlights_on_a_wrap_leave_its_crop_as_the_clean_one(seed):
     """A quarter of the wrap's highlights false: the crop, in the patch's own coordinates,
     still reaches its rims. In the hulls of the anchors (3-D and 2-D) the chords between the
     fewer true hits cut into the top rim, and the truth was 0.29 h (seed 0) and 0.11 h
     (seed 3) from the mesh instead of 0.04 and 0.03 clean."""
-    from warpspec.evaluate import evaluate, truth_region
-
     comp = []
     for outliers in (0.0, 0.25):
         synthetic = make_scene("wrap", outliers=outliers, seed=seed)
         result = ws.reconstruct(synthetic.scene(), resolution=64, device="cpu")
         h = result.grid.spacing
-        region = truth_region(synthetic.truth_points[synthetic.inliers], synthetic.points)
-        ev = evaluate(result.mesh, synthetic.truth_mesh(sections=64), spacing=h,
-                      region=region, samples=5000)
+        ev = _scored(synthetic, result.mesh, h)
         comp.append(ev.completeness.mean / h)
         assert ev.accuracy.mean < 0.1 * h
     assert max(comp) < 0.05 and abs(comp[1] - comp[0]) < 0.02
@@ -578,8 +583,6 @@ def test_a_tube_seen_all_around_is_not_cut_open_where_false_highlights_were_reje
     95 degrees of the kept normals empty, and a rule that cropped any empty arc over 90 degrees
     cut the tube open there (Euler 1, the truth 1.23 h from the mesh). Its cameras stand all
     round (their arcs within 1.14 times of each other): the tube stays whole."""
-    from warpspec.evaluate import evaluate, truth_region
-
     synthetic = make_scene("bottle-lamps", outliers=0.25, seed=200)
     result = ws.reconstruct(synthetic.scene(), resolution=64, device="cpu")
     assert sorted(r["index"] for r in result.rejected) == np.flatnonzero(
@@ -588,9 +591,7 @@ def test_a_tube_seen_all_around_is_not_cut_open_where_false_highlights_were_reje
     mesh.merge_vertices()
     assert mesh.euler_number == synthetic.euler
     h = result.grid.spacing
-    region = truth_region(synthetic.truth_points[synthetic.inliers], synthetic.points)
-    ev = evaluate(mesh, synthetic.truth_mesh(sections=64), spacing=h, region=region,
-                  samples=5000)
+    ev = _scored(synthetic, mesh, h)
     assert ev.completeness.mean < 0.1 * h and ev.accuracy.mean < 0.1 * h
 
 
@@ -765,14 +766,10 @@ def test_a_patch_that_turns_further_than_a_third_of_a_turn_is_cropped_to_its_dat
     # went on round behind the data, 3 voxels from the truth on average and 25 at worst; at
     # 330 with a quarter false, the kept normals leave a 63-degree arc empty, no wider than
     # 1.8 times the next, and the patch was closed into a tube (0.99 voxel off on average)
-    from warpspec.evaluate import evaluate, truth_region
-
     synthetic = make_scene("wrap", span=span, outliers=outliers)
     result = ws.reconstruct(synthetic.scene(), resolution=64, device="cpu")
     h = result.grid.spacing
-    region = truth_region(synthetic.truth_points[synthetic.inliers], synthetic.points)
-    ev = evaluate(result.mesh, synthetic.truth_mesh(sections=64), spacing=h, region=region,
-                  samples=5000)
+    ev = _scored(synthetic, result.mesh, h)
     assert ev.accuracy.mean < 0.2 * h and ev.accuracy.max < 2.5 * h
     assert ev.completeness.mean < 0.2 * h
     assert result.mesh.euler_number == 1
