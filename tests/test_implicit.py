@@ -886,15 +886,8 @@ def test_the_reported_misses_are_those_of_the_final_fit(name, options):
     assert np.median(report.residual_deg[kept]) < 2.0
 
 
-def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior():
-    """A bottle (seed 1) seen by half its highlights (21 flash-lit rays) and 3 of its points:
-    the surface of revolution misses 2 of the normals by 4.6 and 6.5 degrees, too many to be
-    the start by itself, so the grid fit is made about it and about the quadric. Both meet
-    all 21 normals, with median misses of 0.58 and 0.40 degrees (noise either way): the
-    revolution's is kept, 0.94 h from the truth at 64 cells (the quadric's, once taken by
-    its smaller median, 1.34 h)."""
-    from warpspec.evaluate import evaluate, truth_region
-
+def _sparse_bottle():
+    """The bottle (seed 1) seen by half its highlights (21 flash-lit rays), 3 of its points."""
     synthetic = make_scene("bottle", seed=1)
     data = synthetic.scene_dict
     rng = np.random.default_rng(78)
@@ -902,7 +895,26 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior()
     points = sorted(rng.choice(len(data["points"]), 3, replace=False))
     data = {**data, "specularities": [data["specularities"][i] for i in keep],
             "points": [data["points"][i] for i in points]}
-    solver = ws.Reconstructor(ws.Scene.from_dict(data), resolution=64, device="cpu")
+    return synthetic, ws.Scene.from_dict(data), keep, points
+
+
+def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior(monkeypatch):
+    """The sparse bottle with only the refined axis tried: the surface of revolution misses
+    2 of the normals by 4.6 and 6.5 degrees, too many to be the start by itself, so the grid
+    fit is made about it and about the quadric. Both meet all 21 normals, with median misses
+    of 0.58 and 0.40 degrees (noise either way): the revolution's is kept, 0.94 h from the
+    truth at 64 cells (the quadric's, once taken by its smaller median, 1.34 h)."""
+    from warpspec import revolution
+    from warpspec.evaluate import evaluate, truth_region
+
+    fit = revolution.fit_revolution
+
+    def refined_only(*args, refine=True, **kwargs):
+        return fit(*args, refine=True, **kwargs) if refine else (None, None)
+
+    monkeypatch.setattr(revolution, "fit_revolution", refined_only)
+    synthetic, scene, keep, points = _sparse_bottle()
+    solver = ws.Reconstructor(scene, resolution=64, device="cpu")
     assert (solver.fit_report.shape, solver.fit_report.prior) == ("grid", "revolution")
     solver.run(20)
     result = solver.result()
@@ -912,6 +924,38 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior()
     h = float(result.grid.spacing)
     assert evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
                     samples=20000).chamfer / h < 1.1
+
+
+@pytest.mark.parametrize("sparse", [True, False])
+def test_a_flash_bottle_takes_the_axis_whose_profile_meets_more_lines(sparse):
+    """Lines that all pass near one point leave the axis loose, and its refinement drifts.
+    The sparse bottle: about the refined axis the profile misses 2 of 21 lines by 4.6 and
+    6.5 degrees, about the closed-form axis it meets 20 within 3 (the worst 3.1), and it is
+    the start, 0.38 h from the truth (the grid fit made instead: 0.94). The bottle, seed 302
+    (highlights in three bands of height): the refinement drifted 1.75 degrees and no
+    profile about it met the shoulder; the grid fit was 1.3 h from the truth, not a tube.
+    About the closed-form axis: the start, a tube, 0.53 h."""
+    from warpspec.evaluate import evaluate, truth_region
+
+    if sparse:
+        synthetic, scene, keep, points = _sparse_bottle()
+        region = truth_region(synthetic.truth_points[keep], synthetic.points[points])
+        limit = 0.5
+    else:
+        synthetic = make_scene("bottle", seed=302)
+        scene = synthetic.scene()
+        region = truth_region(synthetic.truth_points, synthetic.points)
+        limit = 0.6
+    solver = ws.Reconstructor(scene, resolution=64, device="cpu")
+    assert solver.fit_report.shape == "revolution"
+    solver.run(20)
+    result = solver.result()
+    mesh = result.mesh.copy()
+    mesh.merge_vertices()
+    assert mesh.euler_number == 0
+    h = float(result.grid.spacing)
+    assert evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
+                    samples=20000).chamfer / h < limit
 
 
 @pytest.mark.parametrize("seed", [3, 10])

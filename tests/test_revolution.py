@@ -599,9 +599,10 @@ def test_a_false_line_that_passes_near_the_axis_is_left_out():
 
 
 def test_a_singular_profile_system_gives_no_shape_and_no_error():
-    """The lines of a blob seen all around (seed 9) make the profile's normal equations
-    exactly singular: the out-of-sample misses are not defined then, and the fit gives no
-    shape instead of raising (it raised from the factorisation)."""
+    """A profile's normal equations that are exactly singular give NaN radii and misses
+    (not defined), without a warning. The lines of a blob seen all around (seed 9) make
+    them positive definite but not in floating point (the Cholesky factorisation fails):
+    the fit solves them by LU, without a warning, and its shape, if any, is finite."""
     heights = np.linspace(-1.0, 1.0, 51)
     empty = (np.zeros(0), np.zeros(0), np.zeros(0))
     with warnings.catch_warnings():
@@ -617,7 +618,32 @@ def test_a_singular_profile_system_gives_no_shape_and_no_error():
         warnings.simplefilter("error")
         surface, _ = fit_revolution(*scene.rays(), scene.points, lo=grid.origin,
                                     hi=grid.upper, voxel=grid.spacing)
-    assert surface is None
+    assert surface is None or np.all(np.isfinite(surface.radii))
+
+
+def test_a_profile_the_cholesky_factorisation_refuses_is_solved_by_lu(monkeypatch):
+    """Where floating point leaves the banded normal equations not positive definite, the
+    banded LU factorisation gives the radii and the out-of-sample misses that a dense
+    least-squares solve gives (forced here by refusing every Cholesky factorisation)."""
+    import scipy.linalg
+
+    heights = np.linspace(-1.0, 1.0, 81)
+    rng = np.random.default_rng(4)
+    vh = rng.uniform(-0.9, 0.9, 6)
+    values = (vh, 0.5 + 0.1 * vh**2, np.ones(6))
+    sh = rng.uniform(-0.9, 0.9, 12)
+    slopes = (sh, rng.normal(0.0, 0.1, 12), np.ones(12), np.ones(12))
+    kwargs = dict(scale=2.0, smoothness=1e-3, values=values, slopes=slopes, leave_out=True)
+    radii, misses = R._solve_profile(heights, **kwargs)
+
+    def refuse(*args, **kw):
+        raise np.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(scipy.linalg, "cholesky_banded", refuse)
+    lu_radii, lu_misses = R._solve_profile(heights, **kwargs)
+    assert np.all(np.isfinite(lu_radii))
+    assert np.allclose(lu_radii, radii, rtol=1e-8, atol=1e-10)
+    assert np.allclose(lu_misses, misses, rtol=1e-6, atol=1e-8)
 
 
 def test_the_lines_returned_are_those_the_profile_was_fitted_to(monkeypatch):

@@ -1161,8 +1161,25 @@ class ImplicitStart:
         origins, dirs, codes, _ = self._rays
         if np.all(codes == LIGHT_CAMERA):
             def fit(starts: np.ndarray, inward: np.ndarray) -> R.SurfaceOfRevolution | None:
-                return R.fit_revolution(starts, inward, self.scene.points, lo=lo, hi=hi,
-                                        voxel=voxel)[0]
+                # about the refined axis and the closed-form one, the shape that meets more
+                # of its lines within QUADRIC_DEG: the lines may leave the axis loose. The
+                # bottle seen by flash, seed 302 (highlights in three bands of height, no
+                # point on the neck): the refinement drifted 1.75 degrees, every line still
+                # within 0.001 voxel of it, and no profile about it met the shoulder (14 lines
+                # missed by 22-25 degrees); refused, the grid fit was 1.82 h from the truth.
+                # About the closed-form axis the profile meets 40 of 42 within 3 degrees
+                best = None
+                for refine in (True, False):
+                    shape = R.fit_revolution(starts, inward, self.scene.points, lo=lo,
+                                             hi=hi, voxel=voxel, refine=refine)[0]
+                    if shape is None:
+                        continue
+                    hits, inside = shape.intersect(starts, inward, lo, hi, step=voxel)
+                    met = float(np.mean(miss_deg(shape.gradient(hits), -inward, inside)
+                                        <= QUADRIC_DEG))
+                    if best is None or met > best[0]:
+                        best = (met, shape)
+                return None if best is None else best[1]
 
             return self._from_normal_lines(
                 guess, fit, "a surface of revolution fitted to the highlights' normal lines")

@@ -240,7 +240,7 @@ def _finite_or_none(fit: Callable) -> Callable:
 
 @_finite_or_none
 def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
-                   lo: np.ndarray, hi: np.ndarray, voxel: float
+                   lo: np.ndarray, hi: np.ndarray, voxel: float, refine: bool = True
                    ) -> tuple[SurfaceOfRevolution | None, np.ndarray]:
     """Fit a surface of revolution to normal lines and surface points.
 
@@ -252,6 +252,12 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
         lo: The domain's lower corner.
         hi: The domain's upper corner.
         voxel: The grid's spacing.
+        refine: Refine the axis by the robust least squares of the lines' distances from it
+            (:func:`_refine_axis`); ``False`` keeps the closed-form axis
+            (:func:`warpspec.normal_lines.best_axis`). Lines that all pass near one point
+            (highlights in a few bands of height, each band's normal lines meeting the axis
+            about one point) leave the axis loose: any line through that point meets them,
+            and the refinement can drift along it.
 
     Returns:
         The surface (or ``None`` when fewer than :data:`MIN_RAYS` lines, or less than
@@ -267,13 +273,15 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     c, a = best_axis(p, n)
     if c is None:
         return None, none
-    c, a = _refine_axis(c, a, p, n, voxel)
+    if refine:
+        c, a = _refine_axis(c, a, p, n, voxel)
     near = _line_axis_distance(c, a, p, n) <= AXIS_VOXELS * voxel
     if near.sum() < MIN_RAYS or near.mean() < AXIS_SHARE:
         return None, near
     for _ in range(2):
         # refit to the lines near the axis, then keep those within a few robust deviations
-        c, a = _refine_axis(c, a, p[near], n[near], voxel)
+        if refine:
+            c, a = _refine_axis(c, a, p[near], n[near], voxel)
         dist = _line_axis_distance(c, a, p, n)
         spread = AXIS_SIGMAS * 1.4826 * float(np.median(dist[near]))
         near = dist <= np.clip(spread, AXIS_FLOOR * voxel, AXIS_VOXELS * voxel)
@@ -337,7 +345,7 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     twentieth of a voxel apart (1,700 at 64 cells), and an axis' refinement solves thousands
     of profiles. The band is assembled directly, without a sparse matrix.
     """
-    from scipy.linalg import cho_solve_banded, cholesky_banded
+    from scipy.linalg import cho_solve_banded, cholesky_banded, solve_banded
 
     count = len(heights)
     step = heights[1] - heights[0]
@@ -373,16 +381,36 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     rhs = np.zeros(count)
     np.add.at(rhs, first, lower * b)
     np.add.at(rhs, first + 1, upper * b)
-    factor = None
+    solve = None
     if np.all(np.isfinite(band)) and np.all(np.isfinite(rhs)):
         try:
             factor = cholesky_banded(band, check_finite=False)
+
+            def solve(x: np.ndarray) -> np.ndarray:
+                return cho_solve_banded((factor, False), x, check_finite=False)
         except np.linalg.LinAlgError:
-            pass
-    if factor is None:  # overflowing slopes or a singular system: no profile (NaN radii)
+            # positive definite, yet not in floating point: the third differences' own
+            # eigenvalues over 1,700 knots span some 17 orders of magnitude, and the knots
+            # beyond the data are held by them alone. The banded LU factorisation with
+            # pivoting solves it, as the sparse one did (bottle seed 302 at a tenth false:
+            # every first fit failed so, and the grid fit was 1.3 h from the truth)
+            full = np.zeros((7, count))
+            full[:4] = band
+            for d in range(1, 4):
+                full[3 + d, :count - d] = band[3 - d, d:]
+
+            def solve(x: np.ndarray) -> np.ndarray:
+                return solve_banded((3, 3), full, x, check_finite=False)
+    radii = None
+    if solve is not None:
+        try:
+            radii = solve(rhs)
+        except (np.linalg.LinAlgError, ValueError):
+            radii = None
+    if radii is None or not np.all(np.isfinite(radii)):
+        # overflowing slopes or a singular system: no profile (NaN radii)
         radii = np.full(count, np.nan)
         return radii, (np.full(n_s, np.nan) if leave_out else np.full(n_v + n_s, np.nan))
-    radii = cho_solve_banded((factor, False), rhs, check_finite=False)
     fitted = lower * radii[first] + upper * radii[first + 1]
     if not leave_out:
         return radii, fitted - b
@@ -394,7 +422,7 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     rows_s = np.zeros((n_s, count))
     rows_s[cols, j] = lower[n_v:]
     rows_s[cols, j + 1] = upper[n_v:]
-    z = cho_solve_banded((factor, False), rows_s.T.copy(), check_finite=False)  # (count, n_s)
+    z = solve(rows_s.T.copy())  # (count, n_s)
     lever = np.einsum("ij,ji->i", rows_s, z)
     resid = fitted[n_v:] - b[n_v:]
     with np.errstate(divide="ignore", invalid="ignore"):
