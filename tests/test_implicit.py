@@ -898,6 +898,21 @@ def _sparse_bottle():
     return synthetic, ws.Scene.from_dict(data), keep, points
 
 
+def _bottle_run(solver, synthetic, keep, points):
+    """20 iterations of ``solver``; its mesh and symmetric distance to the truth (voxels)
+    over the hull of the used highlights' true hits (``keep``) and points (``points``)."""
+    from warpspec.evaluate import evaluate, truth_region
+
+    solver.run(20)
+    result = solver.result()
+    mesh = result.mesh.copy()
+    mesh.merge_vertices()
+    region = truth_region(synthetic.truth_points[keep], synthetic.points[points])
+    h = float(result.grid.spacing)
+    return mesh, evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
+                          samples=20000).chamfer / h
+
+
 def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior(monkeypatch):
     """The sparse bottle with only the refined axis tried: the surface of revolution misses
     2 of the normals by 4.6 and 6.5 degrees, too many to be the start by itself, so the grid
@@ -905,7 +920,6 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior(m
     of 0.58 and 0.40 degrees (noise either way): the revolution's is kept, 0.94 h from the
     truth at 64 cells (the quadric's, once taken by its smaller median, 1.34 h)."""
     from warpspec import revolution
-    from warpspec.evaluate import evaluate, truth_region
 
     fit = revolution.fit_revolution
 
@@ -916,14 +930,8 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior(m
     synthetic, scene, keep, points = _sparse_bottle()
     solver = ws.Reconstructor(scene, resolution=64, device="cpu")
     assert (solver.fit_report.shape, solver.fit_report.prior) == ("grid", "revolution")
-    solver.run(20)
-    result = solver.result()
-    mesh = result.mesh.copy()
-    mesh.merge_vertices()
-    region = truth_region(synthetic.truth_points[keep], synthetic.points[points])
-    h = float(result.grid.spacing)
-    assert evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
-                    samples=20000).chamfer / h < 1.1
+    _, chamfer = _bottle_run(solver, synthetic, keep, points)
+    assert chamfer < 1.1
 
 
 @pytest.mark.parametrize("sparse", [True, False])
@@ -935,27 +943,18 @@ def test_a_flash_bottle_takes_the_axis_whose_profile_meets_more_lines(sparse):
     (highlights in three bands of height): the refinement drifted 1.75 degrees and no
     profile about it met the shoulder; the grid fit was 1.3 h from the truth, not a tube.
     About the closed-form axis: the start, a tube, 0.53 h."""
-    from warpspec.evaluate import evaluate, truth_region
-
     if sparse:
         synthetic, scene, keep, points = _sparse_bottle()
-        region = truth_region(synthetic.truth_points[keep], synthetic.points[points])
         limit = 0.5
     else:
         synthetic = make_scene("bottle", seed=302)
-        scene = synthetic.scene()
-        region = truth_region(synthetic.truth_points, synthetic.points)
+        scene, keep, points = synthetic.scene(), slice(None), slice(None)
         limit = 0.6
     solver = ws.Reconstructor(scene, resolution=64, device="cpu")
     assert solver.fit_report.shape == "revolution"
-    solver.run(20)
-    result = solver.result()
-    mesh = result.mesh.copy()
-    mesh.merge_vertices()
+    mesh, chamfer = _bottle_run(solver, synthetic, keep, points)
     assert mesh.euler_number == 0
-    h = float(result.grid.spacing)
-    assert evaluate(mesh, synthetic.truth_mesh(), spacing=h, region=region,
-                    samples=20000).chamfer / h < limit
+    assert chamfer < limit
 
 
 @pytest.mark.parametrize("seed", [3, 10])
