@@ -341,7 +341,8 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
             height: the row's out-of-sample miss.
 
     Every row touches at most four neighbouring knots, so the normal equations are banded
-    (seven diagonals) and solved by a banded Cholesky factorisation: the knots are a
+    (seven diagonals) and solved by a banded Cholesky factorisation (by a banded LU one where
+    floating point leaves them not positive definite): the knots are a
     twentieth of a voxel apart (1,700 at 64 cells), and an axis' refinement solves thousands
     of profiles. The band is assembled directly, without a sparse matrix.
     """
@@ -405,8 +406,8 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     if solve is not None:
         try:
             radii = solve(rhs)
-        except (np.linalg.LinAlgError, ValueError):
-            radii = None
+        except np.linalg.LinAlgError:  # exactly singular: LU finds a zero pivot
+            pass
     if radii is None or not np.all(np.isfinite(radii)):
         # overflowing slopes or a singular system: no profile (NaN radii)
         radii = np.full(count, np.nan)
