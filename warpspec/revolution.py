@@ -534,8 +534,15 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
                          voxel)
     if radius_data is not None:
         points = tuple(np.r_[x, y] for x, y in zip(points, radius_data, strict=True))
+    # the rays are traced to the profile as it is returned, held flat beyond its data
+    # (:func:`_flat_ends`): the third-order energy swells it there, past cameras that stand
+    # beyond the data's heights, and a ray started inside it met it where it left it (bottle
+    # by flash, seed 302: 28 of 42 rays every third round, and the neck's 14 lines were
+    # missed by 22-25 degrees at the truth's axis; held flat, 40 of 42 met within 3)
+    seen = ph
     for round_ in range(PROFILE_ROUNDS):
-        current = SurfaceOfRevolution(profile.base, profile.axis, heights, radii)
+        current = SurfaceOfRevolution(profile.base, profile.axis, heights,
+                                      _flat_ends(heights, radii, seen))
         hits, met = first_crossing(current.value, p, n, p - far * n, p + far * n,
                                    step=voxel, safety=0.5)
         hh, _, e = current.split(hits)
@@ -551,6 +558,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
             misses = np.full(len(p), np.nan)
             misses[use] = out
         radii = np.maximum(radii, 0.0)
+        seen = np.r_[ph, hh[use]]
         # Tukey weights of the slopes' angles on the new profile
         current = SurfaceOfRevolution(profile.base, profile.axis, heights, radii)
         cos = np.abs(np.einsum("ij,ij->i", current.gradient(hits), outward))
