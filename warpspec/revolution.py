@@ -254,10 +254,8 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
         voxel: The grid's spacing.
         refine: Refine the axis by the robust least squares of the lines' distances from it
             (:func:`_refine_axis`); ``False`` keeps the closed-form axis
-            (:func:`warpspec.normal_lines.best_axis`). Lines that all pass near one point
-            (highlights in a few bands of height, each band's normal lines meeting the axis
-            about one point) leave the axis loose: any line through that point meets them,
-            and the refinement can drift along it.
+            (:func:`warpspec.normal_lines.best_axis`), which may be a fraction of a degree
+            off yet give a profile that meets more of the lines where few hold it.
 
     Returns:
         The surface (or ``None`` when fewer than :data:`MIN_RAYS` lines, or less than
