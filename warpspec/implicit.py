@@ -964,12 +964,13 @@ class ImplicitStart:
         stay = self._together(stay, kept | stay)
         # a trial whose every ray stays is a feature, and the kept median may move by its
         # own standard error (the path of the refit); otherwise it must not grow
+        every = np.array_equal(stay, trial)
         grown = float(np.median(self.residual[kept]) - np.median(miss_before[kept]))
-        if grown > (median_error(miss_before[kept]) if np.array_equal(stay, trial) else 0.0):
+        if grown > (median_error(miss_before[kept]) if every else 0.0):
             self.excluded = before
             return previous
         self.excluded = before & ~stay
-        if stay.sum() == trial.sum():
+        if every:
             return candidate
         if not stay.any():
             return previous
