@@ -253,8 +253,7 @@ def median_error(values: np.ndarray) -> float:
     x = np.asarray(values, dtype=np.float64).ravel()
     if len(x) == 0:
         return 0.0
-    mad = float(np.median(np.abs(x - np.median(x))))
-    return math.sqrt(math.pi / 2.0) * 1.4826 * mad / math.sqrt(len(x))
+    return math.sqrt(math.pi / 2.0) * Q.robust_sigma(x - np.median(x)) / math.sqrt(len(x))
 
 
 def _half_met(residual: np.ndarray) -> np.ndarray:
@@ -293,7 +292,7 @@ def ray_convergence(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray | None:
             return x
         x = np.linalg.solve(A, b)
         d = np.linalg.norm(np.einsum("ijk,ik->ij", proj, x[None] - origins), axis=1)
-        s = max(1.4826 * float(np.median(d)), 1e-12)
+        s = max(Q.robust_sigma(d), 1e-12)
         w = 1.0 / (1.0 + (d / (2.0 * s)) ** 2)
     return x
 
@@ -1120,7 +1119,7 @@ class ImplicitStart:
         live = (self.kind.numpy() != K.ANCHOR_NONE) & ~self.excluded
         if not live.any():
             return math.inf
-        sigma = 1.4826 * float(np.median(self.residual[live]))
+        sigma = Q.robust_sigma(self.residual[live])
         return max(REJECT_SIGMAS * sigma, REJECT_DEG)
 
     def _quadric_suffices(self, inside: np.ndarray) -> bool:

@@ -18,7 +18,7 @@ import numpy as np
 
 from .geometry import angle_deg
 
-__all__ = ["Quadric", "biweight", "fit_quadric"]
+__all__ = ["Quadric", "biweight", "fit_quadric", "robust_sigma"]
 
 ROUNDS = 25
 """Intersect-and-refit rounds."""
@@ -294,10 +294,20 @@ def robust_weights(angle: np.ndarray, live: np.ndarray, *, limit_deg: float,
     """
     if not live.any():
         return np.zeros(len(angle))
-    sigma = 1.4826 * float(np.median(angle[live]))
+    sigma = robust_sigma(angle[live])
     w = biweight(angle, max(tukey * sigma, limit_deg))
     w[~live] = 0.0
     return w
+
+
+def robust_sigma(magnitudes: np.ndarray) -> float:
+    """The robust standard deviation of residual magnitudes: 1.4826 times their median.
+
+    For residuals that are normal about zero, ``1.4826 median(|x|)`` estimates their standard
+    deviation; false ones move it only as they move the median. Zero for no values.
+    """
+    x = np.abs(np.asarray(magnitudes, dtype=np.float64)).ravel()
+    return 1.4826 * float(np.median(x)) if len(x) else 0.0
 
 
 def biweight(residual: np.ndarray, limit: float) -> np.ndarray:

@@ -36,7 +36,7 @@ import numpy as np
 
 from .geometry import angle_deg, miss_deg, plane_frame
 from .normal_lines import best_axis, first_crossing
-from .quadric import biweight
+from .quadric import biweight, robust_sigma
 
 __all__ = ["SurfaceOfRevolution", "fit_revolution", "fit_revolution_lit"]
 
@@ -281,7 +281,7 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
         if refine:
             c, a = _refine_axis(c, a, p[near], n[near], voxel)
         dist = _line_axis_distance(c, a, p, n)
-        spread = AXIS_SIGMAS * 1.4826 * float(np.median(dist[near]))
+        spread = AXIS_SIGMAS * robust_sigma(dist[near])
         near = dist <= np.clip(spread, AXIS_FLOOR * voxel, AXIS_VOXELS * voxel)
         if near.sum() < MIN_RAYS:
             return None, near
