@@ -57,14 +57,15 @@ from warpspec.errors import InputError, ReconstructionError, SceneError
 from warpspec.evaluate import evaluate, truth_region
 from warpspec.synthetic import SyntheticScene, make_scene
 
-SHAPES = ("sphere-around", "ellipsoid-around", "torus", "torus-lamps", "torus-point", "blob",
-          "bottle", "bottle-lamps", "wrap", "freeform", "point-light")
+SHAPES = ("sphere-around", "ellipsoid-around", "pebble", "torus", "torus-lamps", "torus-point",
+          "blob", "bottle", "bottle-lamps", "wrap", "freeform", "point-light")
 PAPER = ("octant", "ellipsoid-cap", "car-window", "wine-bottle")
 # Truth meshes written next to the example scene files: coarse, to keep the folder small
 # (``warpspec synth NAME --truth MESH`` writes the full-resolution one).
 PLY_OPTIONS = {
     "sphere-around": {"subdivisions": 3},
     "ellipsoid-around": {"subdivisions": 3},
+    "pebble": {"subdivisions": 3},
     "torus": {"sections": 48, "tube": 16},
     "torus-lamps": {"sections": 48, "tube": 16},
     "torus-point": {"sections": 48, "tube": 16},

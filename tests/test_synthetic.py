@@ -37,9 +37,9 @@ from warpspec.synthetic import (
     scene_names,
 )
 
-SHAPES = ["sphere-around", "ellipsoid-around", "torus", "torus-lamps", "torus-point", "blob",
-          "bottle", "bottle-lamps", "wrap", "freeform", "point-light"]
-CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "torus": 0, "torus-lamps": 0,
+SHAPES = ["sphere-around", "ellipsoid-around", "pebble", "torus", "torus-lamps", "torus-point",
+          "blob", "bottle", "bottle-lamps", "wrap", "freeform", "point-light"]
+CLOSED = {"sphere-around": 2, "ellipsoid-around": 2, "pebble": 2, "torus": 0, "torus-lamps": 0,
           "torus-point": 0, "blob": 2}
 
 NAMES = scene_names()

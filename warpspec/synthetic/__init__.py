@@ -22,7 +22,8 @@ Built-in scenes (:func:`make_scene`) reproduce the paper's experiments with look
 
 A second set covers every shape class, its geometry varied a little by ``seed`` (sizes, axis
 ratios, bump positions, camera jitter, which points are chosen): closed objects seen all around
-(``sphere-around``, ``ellipsoid-around`` with a lamp per camera, ``torus`` by flash and
+(``sphere-around``, ``ellipsoid-around`` with a lamp per camera and ``pebble``, a flat one,
+``torus`` by flash and
 ``torus-lamps`` with a lamp per camera, ``torus-point`` under one point lamp, and ``blob``, a
 sphere raised by bumps that no closed-form shape fits), a ``bottle`` open at the domain's ends
 (by flash, and ``bottle-lamps`` with a lamp per camera), a ``wrap`` patch spanning more than

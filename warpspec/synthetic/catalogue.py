@@ -335,6 +335,30 @@ def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     )
 
 
+def pebble(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
+    """A flat ellipsoid (a pebble or a lens: axes about 1, 0.9, 0.35) seen all around.
+
+    As ``ellipsoid-around`` (28 cameras at 3.2 from the centre, each with its own directional
+    lamp 25-40 degrees off its viewing direction, six points, the box grown by 12% of the
+    longest axis), but about three times longer than thick: most points lie on the flat
+    faces, well inside the rim. The seed varies the radii (the short one from 0.3 to 0.4),
+    which axis each lies along, the centre, the cameras and the lights.
+    """
+    rng = _shape_rng(seed, "pebble")
+    radii = np.array([1.0, rng.uniform(0.85, 0.95), rng.uniform(0.3, 0.4)])[rng.permutation(3)]
+    centre = rng.uniform(-0.1, 0.1, 3)
+    surf = Ellipsoid(centre, radii)
+    mesh = surf.mesh(subdivisions=5)
+    dirs = _around(28, rng)
+    return scene_from_path(
+        surf, centre + 3.2 * dirs, light=_lamps(dirs, rng), look_at_points=centre,
+        points=_pick_points(mesh.vertices, surf, 6, rng), domain=_margin_box(mesh.vertices),
+        candidates=mesh.vertices, name="pebble", mesh_options={"subdivisions": 5},
+        noise=noise, outliers=outliers, seed=seed, false_highlights="surface", closed=True,
+        euler=2,
+    )
+
+
 def blob(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
     """A closed free-form object (:class:`~.surfaces.Blob`) seen all around by flash cameras.
 
@@ -629,6 +653,7 @@ SCENES: dict[str, Callable[..., SyntheticScene]] = {
     "saddle": saddle,
     "sphere-around": sphere_around,
     "ellipsoid-around": ellipsoid_around,
+    "pebble": pebble,
     "torus": torus,
     "torus-lamps": torus_lamps,
     "torus-point": torus_point,
