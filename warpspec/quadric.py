@@ -245,12 +245,13 @@ def solve_quadric(points: np.ndarray, anchors: np.ndarray, normals: np.ndarray,
 
 
 def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
-                robust_from: int = 3, frame: np.ndarray | None = None
-                ) -> tuple[Quadric, np.ndarray, np.ndarray]:
+                robust_from: int = 3, frame: np.ndarray | None = None,
+                use: np.ndarray | None = None) -> tuple[Quadric, np.ndarray, np.ndarray]:
     """Alternate intersection and fit from ``initial``.
 
     With ``frame`` (rows: the plane's two axes and its normal) the quadric is restricted to the
-    quadratic height fields over that plane (:func:`height_map`).
+    quadratic height fields over that plane (:func:`height_map`). With ``use`` (a mask of the
+    rays, ``(M,)``) only those rays are fitted; every ray's residual is measured.
 
     Returns:
         The quadric, each ray's robust weight ``(M,)`` and residual angle in degrees ``(M,)``.
@@ -267,17 +268,18 @@ def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxe
         cos = np.einsum("ij,ij->i", g, normals) / np.maximum(np.linalg.norm(g, axis=1), 1e-300)
         angle = angle_deg(cos)
         angle[~inside] = 180.0
+        fitted = inside if use is None else inside & use
         if round_ >= robust_from:
             # the floor of the limit falls from LIMIT_DEG to FINAL_LIMIT_DEG over the rounds:
             # on a quadric the legitimate normals end within noise and the false ones apart
             t = (round_ - robust_from) / max(ROUNDS - 1 - robust_from, 1)
             floor = LIMIT_DEG * (FINAL_LIMIT_DEG / LIMIT_DEG) ** t
-            weights = robust_weights(angle, inside, limit_deg=floor)
+            weights = robust_weights(angle, fitted, limit_deg=floor)
         else:
-            weights = inside.astype(float)
+            weights = fitted.astype(float)
         w = weights * np.where(crossing, 1.0, MISS_WEIGHT)
-        coeffs = solve_quadric(scene.points.reshape(-1, 3), anchors[inside], normals[inside],
-                               w[inside], centre=quad.centre, scale=quad.scale, voxel=voxel,
+        coeffs = solve_quadric(scene.points.reshape(-1, 3), anchors[fitted], normals[fitted],
+                               w[fitted], centre=quad.centre, scale=quad.scale, voxel=voxel,
                                space=None if frame is None else height_map(frame))
         quad = Quadric(coeffs, quad.centre, quad.scale)
     return quad, weights, angle
