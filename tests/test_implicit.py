@@ -285,6 +285,44 @@ def test_a_flat_object_is_found_despite_its_start_and_false_highlights(seed, con
     assert dist.max() < 0.01 * grid.spacing
 
 
+def _pebble_under_a_lamp(seed: int):
+    """A flat ellipsoid seen all around by 28 cameras under one point lamp above it."""
+    from warpspec.synthetic import catalogue as C
+    from warpspec.synthetic.scenes import scene_from_path
+    from warpspec.synthetic.surfaces import Ellipsoid
+
+    rng = np.random.default_rng(seed + 1000)
+    surf = Ellipsoid([0.0, 0.0, 0.0], [1.0, 0.9, 0.35])
+    mesh = surf.mesh(subdivisions=5)
+    lamp = C.PointLight(3.0 * np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0]))
+    return scene_from_path(
+        surf, 3.2 * C._around(28, rng), light=lamp, look_at_points=np.zeros(3),
+        points=C._pick_points(mesh.vertices, surf, 6, rng), domain=C._margin_box(mesh.vertices),
+        candidates=mesh.vertices, closed=True, euler=2)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_under_a_point_light_the_quadric_fit_settles(seed, monkeypatch):
+    """Under a point lamp the normal a ray asks moves with its hit. Undamped, the fit of a
+    flat ellipsoid from the sphere through its points goes round between quadrics either side
+    of the truth and misses some normals by 3-6 degrees; damped, it meets every one within
+    3 degrees but at most one, and the start is the quadric."""
+    synthetic = _pebble_under_a_lamp(seed)
+    scene = synthetic.scene()
+    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
+    lo, hi = grid.origin, grid.upper
+    guess = first_guess(scene, grid, initial_plane(scene, grid))
+    frame, scale = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
+    start = Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
+    _, _, damped = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
+    assert np.sum(damped > 3.0) <= 1
+    fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))
+    assert fit.run(wp.zeros(grid.shape, dtype=float, device="cpu")).shape == "quadric"
+    monkeypatch.setattr(Q, "POINT_DAMPING", 0.0)
+    _, _, undamped = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
+    assert np.sum(undamped > 3.0) >= 2
+
+
 def test_height_map_is_a_single_sheet_over_the_plane():
     frame = np.eye(3)  # u = x, v = y, normal z
     T, c0 = Q.height_map(frame)
