@@ -24,8 +24,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-SCENES = ("octant", "sphere-around", "ellipsoid-around", "torus", "torus-lamps", "torus-point",
-          "blob", "bottle", "bottle-lamps", "wrap", "freeform", "point-light")
+SCENES = ("octant", "sphere-around", "ellipsoid-around", "pebble", "torus", "torus-lamps",
+          "torus-point", "blob", "bottle", "bottle-lamps", "wrap", "freeform", "point-light")
 STAGES = ("quadric", "torus", "revolution", "robust passes", "cross-validation", "grid fit",
           "grid fit again", "other set-up", "iterations", "meshing", "total")
 

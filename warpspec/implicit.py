@@ -77,17 +77,17 @@ is refused by its normals."""
 QUADRIC_POINT_SIZE = 1.0 / 64.0
 """The points' tolerance, as a share of the domain's largest side."""
 CONSENSUS_RAYS = 6
-"""When no quadric fit from the starts meets QUADRIC_SHARE of the normals, fits to random
-subsets of this many rays (and every point) look for a quadric that does: false highlights can
-drag the fit of every ray into a wrong quadric before its robust weights start (the ``pebble``
-scene, seed 9, a quarter false: 0 of 28 normals met from any start), while in a subset they
-are few, and its own robust weights drop them. Six rays and the points fix a quadric's nine
-coefficients; on that scene 12 of 40 subsets of six found the quadric that meets every true
-normal."""
+"""When no quadric fit from the starts meets QUADRIC_SHARE of the normals, and neither a
+torus nor a surface of revolution is the start, fits to random subsets of this many rays
+(and every point) look for a quadric that does: false highlights can drag the fit of every
+ray into a wrong quadric before its robust weights start (the ``pebble`` scene, seed 9, a
+quarter false: 0 of 28 normals met from any start), while in a subset they are few, and its
+own robust weights drop them. Six rays and the points fix a quadric's nine coefficients; on
+that scene 12 of 40 subsets of six found the quadric that meets every true normal."""
 CONSENSUS_TRIALS = 16
 """Most subsets tried (the search stops at the first whose quadric meets QUADRIC_SHARE). At
-three in ten finding it, 16 miss with odds under 1 in 300; a shape that is no quadric costs
-every trial, each a few hundredths of a second."""
+three in ten finding it, 16 miss with odds under 1 in 300. A shape that no closed form fits
+(the grid fit's, seconds) pays for every trial, 0.2-0.3 s in all."""
 REJECT_DEG = 10.0
 """A ray whose normal a robust pass misses by more than this, and by more than REJECT_SIGMAS
 robust standard deviations of the kept rays' misses, is rejected as false."""
@@ -766,6 +766,12 @@ class ImplicitStart:
             self.revolution = revolution
             shape = "revolution"
             self._revolution_field(revolution, out)
+        elif (found := self._consensus_quadric(
+                Q.sphere(ball.centre, scale, frame_centre=frame, scale=scale))) is not None:
+            self.quadric, self.weights, self.residual = found
+            self._quadric_field(self.grid, out)
+            self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
+            shape = "quadric"
         else:
             # a torus or a surface of revolution that meets more normals than the quadric
             # (shares of every ray, 180 degrees off where a ray misses the shape) but not
@@ -1169,15 +1175,14 @@ class ImplicitStart:
         starts.append(Q.sphere(ball.centre, scale, frame_centre=frame, scale=scale))
         fits = [Q.fit_quadric(self.scene, start, lo=lo, hi=hi, voxel=self.grid.spacing)
                 for start in starts]
-        best = max(fits, key=lambda fit: _met(fit[2]))
-        if _met(best[2]) < QUADRIC_SHARE and self.m > CONSENSUS_RAYS:
-            best = self._consensus_quadric(starts[-1]) or best
-        return best
+        return max(fits, key=lambda fit: _met(fit[2]))
 
     def _consensus_quadric(self, start: Q.Quadric
                            ) -> tuple[Q.Quadric, np.ndarray, np.ndarray] | None:
         """A quadric that meets QUADRIC_SHARE of the normals, found from subsets of the rays.
 
+        Tried when neither the quadric fitted to every ray, nor a torus, nor a surface of
+        revolution is the start (so a torus or a bottle does not pay for it).
         Fits to CONSENSUS_RAYS random rays each (a fixed sequence: the same scene gives the
         same start), from ``start``, until one meets QUADRIC_SHARE of every ray's normal; then
         the fit to the rays it meets within REJECT_DEG, robust from the first round, or that
@@ -1188,6 +1193,8 @@ class ImplicitStart:
         worse). ``None`` when no subset's quadric meets that share, or neither fit is the
         start.
         """
+        if _met(self.residual) >= QUADRIC_SHARE or self.m <= CONSENSUS_RAYS:
+            return None
         lo, hi = self.grid.origin, self.grid.upper
         rng = np.random.default_rng(0)
         for _ in range(CONSENSUS_TRIALS):
