@@ -285,7 +285,7 @@ def test_a_flat_object_is_found_despite_its_start_and_false_highlights(seed, con
     assert dist.max() < 0.01 * grid.spacing
 
 
-def _pebble_under_a_lamp(seed: int):
+def _pebble_under_a_lamp(seed: int, outliers: float = 0.0):
     """A flat ellipsoid seen all around by 28 cameras under one point lamp above it."""
     from warpspec.synthetic import catalogue as C
     from warpspec.synthetic.scenes import scene_from_path
@@ -298,7 +298,8 @@ def _pebble_under_a_lamp(seed: int):
     return scene_from_path(
         surf, 3.2 * C._around(28, rng), light=lamp, look_at_points=np.zeros(3),
         points=C._pick_points(mesh.vertices, surf, 6, rng), domain=C._margin_box(mesh.vertices),
-        candidates=mesh.vertices, closed=True, euler=2)
+        candidates=mesh.vertices, closed=True, euler=2, outliers=outliers, seed=seed,
+        false_highlights="surface")
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -321,6 +322,22 @@ def test_under_a_point_light_the_quadric_fit_settles(seed, monkeypatch):
     monkeypatch.setattr(Q, "POINT_DAMPING", 0.0)
     _, _, undamped = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
     assert np.sum(undamped > 3.0) >= 2
+
+
+def test_a_quadric_in_the_wrong_basin_is_found_from_subsets():
+    """The flat ellipsoid under a lamp, seed 2, a tenth false: from every start the fit
+    misses two true normals by 6-9 degrees (from the truth it meets them all), so it is not
+    the start, nor a torus or a surface of revolution; a subset's fit is, and rejects exactly
+    the false highlights."""
+    synthetic = _pebble_under_a_lamp(2, outliers=0.1)
+    scene = synthetic.scene()
+    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
+    fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))
+    report = fit.run(wp.zeros(grid.shape, dtype=float, device="cpu"))
+    assert report.shape == "quadric"
+    assert np.array_equal(report.weights == 0, synthetic.outlier_mask)
+    true = ~synthetic.outlier_mask
+    assert report.residual_deg[true].max() < 3.0
 
 
 def test_height_map_is_a_single_sheet_over_the_plane():
