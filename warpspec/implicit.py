@@ -77,17 +77,17 @@ is refused by its normals."""
 QUADRIC_POINT_SIZE = 1.0 / 64.0
 """The points' tolerance, as a share of the domain's largest side."""
 CONSENSUS_RAYS = 6
-"""When no quadric fit from the starts meets QUADRIC_SHARE of the normals, and neither a
-torus nor a surface of revolution is the start, fits to random subsets of this many rays
-(and every point) look for a quadric that does: false highlights can drag the fit of every
-ray into a wrong quadric before its robust weights start (the ``pebble`` scene, seed 9, a
-quarter false: 0 of 28 normals met from any start), while in a subset they are few, and its
-own robust weights drop them. Six rays and the points fix a quadric's nine coefficients; on
-that scene 12 of 40 subsets of six found the quadric that meets every true normal."""
+"""When neither the quadric fitted to every ray, nor a torus, nor a surface of revolution is
+the start, fits to random subsets of this many rays (and every point) look for a quadric that
+is: false highlights can drag the fit of every ray into a wrong quadric before its robust
+weights start (the ``pebble`` scene, seed 9, a quarter false: 0 of 28 normals met from any
+start), while in a subset they are few, and its own robust weights drop them. Six rays and
+the points fix a quadric's nine coefficients; on that scene 12 of 40 subsets of six found
+the quadric that meets every true normal."""
 CONSENSUS_TRIALS = 16
-"""Most subsets tried (the search stops at the first whose quadric meets QUADRIC_SHARE). At
-three in ten finding it, 16 miss with odds under 1 in 300. A shape that no closed form fits
-(the grid fit's, seconds) pays for every trial, 0.2-0.3 s in all."""
+"""Most subsets tried (the search stops at the first that gives the start). At three in ten
+finding it, 16 miss with odds under 1 in 300. A shape that no closed form fits (the grid
+fit's, seconds) pays for every trial, 0.2-0.3 s in all."""
 REJECT_DEG = 10.0
 """A ray whose normal a robust pass misses by more than this, and by more than REJECT_SIGMAS
 robust standard deviations of the kept rays' misses, is rejected as false."""
