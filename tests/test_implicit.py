@@ -11,6 +11,7 @@ from warpspec.geometry import crop_to_data_hull, crop_to_unwrapped_hull
 from warpspec.grid import Grid
 from warpspec.implicit import (
     ImplicitStart,
+    box_frame,
     first_guess,
     level_ladder,
     ray_convergence,
@@ -235,17 +236,25 @@ def test_the_quadric_fit_rejects_false_highlights():
     assert dist.max() < 1e-3 * grid.spacing
 
 
+def _guess_start(scene, radius: float | None = None):
+    """The grid at 64, its box, the first guess, the quadrics' scale and a sphere about the
+    guess (its own radius, or ``radius``)."""
+    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
+    lo, hi = grid.origin, grid.upper
+    guess = first_guess(scene, grid, initial_plane(scene, grid))
+    frame, scale = box_frame(lo, hi)
+    start = Q.sphere(guess.centre, guess.radius if radius is None else radius,
+                     frame_centre=frame, scale=scale)
+    return grid, lo, hi, guess, scale, start
+
+
 def test_the_quadric_fit_to_some_rays_measures_every_ray():
     """Fitted to the true rays alone (``use``), the quadric is the sphere, and the false
     rays' residuals are measured against it: each off by the 15 degrees or more they were
     drawn with."""
     synthetic = make_scene("sphere-around", outliers=0.25)
     scene = synthetic.scene()
-    lo, hi = scene.bounds()
-    grid = Grid.from_bounds(lo, hi, resolution=64)
-    guess = first_guess(scene, grid, initial_plane(scene, grid))
-    frame, scale = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
-    start = Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
+    grid, lo, hi, _, scale, start = _guess_start(scene)
     true = ~synthetic.outlier_mask
     quad, weights, angle = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing,
                                          robust_from=Q.ROUNDS, use=true)
@@ -265,12 +274,9 @@ def test_a_flat_object_is_found_despite_its_start_and_false_highlights(seed, con
     find the quadric. The start is that quadric, and rejects exactly the false highlights."""
     synthetic = make_scene("pebble", seed=seed, outliers=0.25)
     scene = synthetic.scene()
-    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
-    lo, hi = grid.origin, grid.upper
-    guess = first_guess(scene, grid, initial_plane(scene, grid))
-    frame, scale = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
+    grid, lo, hi, guess, scale, _ = _guess_start(scene)
     for radius, met in ((guess.radius, False), (scale, not consensus)):
-        start = Q.sphere(guess.centre, radius, frame_centre=frame, scale=scale)
+        start = _guess_start(scene, radius)[-1]
         _, _, angle = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
         assert np.array_equal(angle <= 3.0, ~synthetic.outlier_mask) if met else (
             np.mean(angle <= 3.0) < 0.1)
@@ -310,11 +316,7 @@ def test_under_a_point_light_the_quadric_fit_settles(seed, monkeypatch):
     3 degrees but at most one, and the start is the quadric."""
     synthetic = _pebble_under_a_lamp(seed)
     scene = synthetic.scene()
-    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
-    lo, hi = grid.origin, grid.upper
-    guess = first_guess(scene, grid, initial_plane(scene, grid))
-    frame, scale = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
-    start = Q.sphere(guess.centre, guess.radius, frame_centre=frame, scale=scale)
+    grid, lo, hi, _, _, start = _guess_start(scene)
     _, _, damped = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
     assert np.sum(damped > 3.0) <= 1
     fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))

@@ -766,8 +766,7 @@ class ImplicitStart:
             self.revolution = revolution
             shape = "revolution"
             self._revolution_field(revolution, out)
-        elif (found := self._consensus_quadric(
-                Q.sphere(ball.centre, scale, frame_centre=frame, scale=scale))) is not None:
+        elif (found := self._consensus_quadric(self._wide_sphere(ball.centre))) is not None:
             self.quadric, self.weights, self.residual = found
             self._quadric_field(self.grid, out)
             self.weights = np.where(self.weights > 0.0, 1.0, 0.0)
@@ -1172,10 +1171,15 @@ class ImplicitStart:
         starts = [initial]
         if plane:
             starts.append(Q.sphere(ball.centre, ball.radius, frame_centre=frame, scale=scale))
-        starts.append(Q.sphere(ball.centre, scale, frame_centre=frame, scale=scale))
+        starts.append(self._wide_sphere(ball.centre))
         fits = [Q.fit_quadric(self.scene, start, lo=lo, hi=hi, voxel=self.grid.spacing)
                 for start in starts]
         return max(fits, key=lambda fit: _met(fit[2]))
+
+    def _wide_sphere(self, centre: np.ndarray) -> Q.Quadric:
+        """A sphere about ``centre`` as wide as the domain (radius half its longest side)."""
+        frame, scale = box_frame(self.grid.origin, self.grid.upper)
+        return Q.sphere(centre, scale, frame_centre=frame, scale=scale)
 
     def _consensus_quadric(self, start: Q.Quadric
                            ) -> tuple[Q.Quadric, np.ndarray, np.ndarray] | None:

@@ -322,6 +322,18 @@ def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     """
     rng = _shape_rng(seed, "ellipsoid-around")
     radii = np.array([1.0, 0.82, 0.67]) * rng.uniform(0.94, 1.06, 3)
+    return _ellipsoid_under_lamps("ellipsoid-around", radii, rng, noise=noise,
+                                  outliers=outliers, seed=seed)
+
+
+def _ellipsoid_under_lamps(name: str, radii: np.ndarray, rng: np.random.Generator, *,
+                           noise: float, outliers: float, seed: int) -> SyntheticScene:
+    """An ellipsoid of ``radii`` about a centre within 0.1 of the origin, seen all around.
+
+    28 cameras at 3.2 from the centre, each with its own lamp (:func:`_lamps`), six points;
+    domain: the box grown by 12% of the longest axis. ``rng`` draws the centre, the cameras,
+    the lamps and the points, in that order.
+    """
     centre = rng.uniform(-0.1, 0.1, 3)
     surf = Ellipsoid(centre, radii)
     mesh = surf.mesh(subdivisions=5)
@@ -329,7 +341,7 @@ def ellipsoid_around(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0
     return scene_from_path(
         surf, centre + 3.2 * dirs, light=_lamps(dirs, rng), look_at_points=centre,
         points=_pick_points(mesh.vertices, surf, 6, rng), domain=_margin_box(mesh.vertices),
-        candidates=mesh.vertices, name="ellipsoid-around", mesh_options={"subdivisions": 5},
+        candidates=mesh.vertices, name=name, mesh_options={"subdivisions": 5},
         noise=noise, outliers=outliers, seed=seed, false_highlights="surface", closed=True,
         euler=2,
     )
@@ -346,17 +358,8 @@ def pebble(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> Synth
     """
     rng = _shape_rng(seed, "pebble")
     radii = np.array([1.0, rng.uniform(0.85, 0.95), rng.uniform(0.3, 0.4)])[rng.permutation(3)]
-    centre = rng.uniform(-0.1, 0.1, 3)
-    surf = Ellipsoid(centre, radii)
-    mesh = surf.mesh(subdivisions=5)
-    dirs = _around(28, rng)
-    return scene_from_path(
-        surf, centre + 3.2 * dirs, light=_lamps(dirs, rng), look_at_points=centre,
-        points=_pick_points(mesh.vertices, surf, 6, rng), domain=_margin_box(mesh.vertices),
-        candidates=mesh.vertices, name="pebble", mesh_options={"subdivisions": 5},
-        noise=noise, outliers=outliers, seed=seed, false_highlights="surface", closed=True,
-        euler=2,
-    )
+    return _ellipsoid_under_lamps("pebble", radii, rng, noise=noise, outliers=outliers,
+                                  seed=seed)
 
 
 def blob(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0) -> SyntheticScene:
