@@ -1294,10 +1294,11 @@ class ImplicitStart:
                 # The refined axis is the truth's on the catalogue's bottles, but a profile
                 # about an axis a fraction of a degree off may meet more lines where few
                 # highlights hold it: the sparse bottle (21 of seed 1's highlights, 3
-                # points), about the refined axis, misses 2 of the neck's lines by 4.5 and
-                # 6.4 degrees and is refused (the grid fit about it: 0.94 h from the truth);
-                # about the closed-form axis (0.6 degrees off) it meets 20 of 21 and is the
-                # start, 0.38 h
+                # points), about the refined axis, missed 2 of the neck's lines by 4.5 and
+                # 6.4 degrees and was refused (the grid fit about it: 0.94 h from the truth);
+                # about the closed-form axis (0.6 degrees off) it met 20 of 21 and was the
+                # start, 0.38 h (measured before the profile's flatness, with which both
+                # meet them)
                 best = None
                 for refine in (True, False):
                     shape = R.fit_revolution(starts, inward, self.scene.points, lo=lo,
