@@ -1082,19 +1082,29 @@ class ImplicitStart:
         resolution = ([r for r in ladder if r <= ROBUST_TOP] or ladder[:1])[-1]
         out = trial.copy()
         for i in np.flatnonzero(trial):
-            self.excluded = before & ~trial
-            self.excluded[i] = True
             self.tried = trial.copy()
             self.tried[i] = False
             try:
-                level = self._ladder([resolution], [], [], quiet=True, start=candidate)
+                miss = self._misses_without([i], before & ~trial, candidate, resolution)
             finally:
                 self.tried = np.zeros(self.m, dtype=bool)
-            self._anchor(level)
-            self._update_weights(level)
-            out[i] = self.residual[i] <= CV_DEG
+            out[i] = miss[i] <= CV_DEG
         self.excluded = before & ~trial
         return out
+
+    def _misses_without(self, held: np.ndarray | list[int], excluded: np.ndarray, start: _Level,
+                        resolution: int) -> np.ndarray:
+        """Every ray's normal miss (degrees) by a fit made without the ``held`` rays.
+
+        The fit is of ``resolution`` cells, started from ``start``, the ``excluded`` rays out
+        too (they stay excluded, with ``held``, until the caller resets them).
+        """
+        self.excluded = excluded.copy()
+        self.excluded[held] = True
+        level = self._ladder([resolution], [], [], quiet=True, start=start)
+        self._anchor(level)
+        self._update_weights(level)
+        return self.residual
 
     def _together(self, rays: np.ndarray, among: np.ndarray) -> np.ndarray:
         """Those of ``rays`` (a mask) whose hits neighbour another's (a mask of all rays).
@@ -1149,12 +1159,7 @@ class ImplicitStart:
             miss = np.full(self.m, 180.0)
             for fold in range(folds):
                 held = order[fold::folds]
-                self.excluded = base.copy()
-                self.excluded[held] = True
-                level = self._ladder([resolution], [], [], quiet=True, start=reference)
-                self._anchor(level)
-                self._update_weights(level)
-                miss[held] = self.residual[held]
+                miss[held] = self._misses_without(held, base, reference, resolution)[held]
             self.excluded = base
             met = ~base & (miss < 180.0)
             over = met & (miss > np.where(inner, CV_DEG, CV_HULL_DEG))
