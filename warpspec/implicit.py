@@ -302,6 +302,14 @@ def level_ladder(resolution: int) -> list[int]:
     return levels
 
 
+def _robust_levels(ladder: list[int]) -> list[int]:
+    """The levels of the robust passes: up to ROBUST_TOP cells, else the coarsest.
+
+    Cross-validation and the full-weight trial's foresight fit the last of them.
+    """
+    return [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
+
+
 def ray_convergence(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray | None:
     """Least-squares point nearest to all rays (robust: rays far from it are down-weighted).
 
@@ -846,7 +854,7 @@ class ImplicitStart:
         without the rays it misses, looked supported.
         """
         self.excluded = np.zeros(self.m, dtype=bool)
-        coarse = [r for r in ladder if r <= ROBUST_TOP] or ladder[:1]
+        coarse = _robust_levels(ladder)
         for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
             self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
                       f"(grids {', '.join(map(str, coarse))})")
@@ -1079,7 +1087,7 @@ class ImplicitStart:
         false highlights that a fit bent to meet one by one do not. ``before``: the rays
         rejected before the trial, which stay out. Returns a mask of all rays.
         """
-        resolution = ([r for r in ladder if r <= ROBUST_TOP] or ladder[:1])[-1]
+        resolution = _robust_levels(ladder)[-1]
         out = trial.copy()
         for i in np.flatnonzero(trial):
             self.tried = trial.copy()
