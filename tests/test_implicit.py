@@ -620,6 +620,17 @@ def test_false_highlights_side_by_side_stay_out_unless_each_foresees_the_other()
     assert {18, 28} <= set(solver.fit_report.rejected.tolist())
 
 
+def test_true_rays_tried_back_may_grow_a_tiny_median_by_a_floor():
+    """The point-lit dome, seed 500, clean: the first robust pass rejects true rays 9, 21 and
+    25. Tried back at full weight all three are met within 1.1 degrees, and the kept median
+    grows 0.113 -> 0.136 degrees, beyond its standard error (0.018) but within the refit's
+    path (``TRIAL_FLOOR_DEG``); the others foresee each, and all three come back (refused,
+    the dome was 0.22 h from the truth instead of 0.11)."""
+    synthetic = make_scene("point-light", seed=500)
+    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
+    assert solver.fit_report.rejected.size == 0
+
+
 def test_median_error_is_the_spread_of_the_median_over_samples():
     """The standard error of the median is sqrt(pi / 2) sigma / sqrt(n) for normal data: over
     4,000 samples of 101, the medians' spread matches the mean estimate within 5% (without
