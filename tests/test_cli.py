@@ -286,6 +286,33 @@ def test_crop_hull_keeps_fewer_faces(first_run, capsys, tmp_path):
     assert 0 < len(cropped.faces) < len(whole.faces)
 
 
+def test_crop_hull_and_auto_drop_the_sphere_behind_the_octant_in_a_wide_domain(capsys,
+                                                                                tmp_path):
+    """In a domain twice as wide, the octant's fit is the unit sphere; its back lies inside
+    the constraints' hull, which is 2-D, seen along the data's normal. Neither crop keeps it:
+    the faces face the data's side, ``n . (1, 1, 1) > 0`` (down to -1.7 on the back)."""
+    data = json.loads(OCTANT.read_text())
+    lo, hi = np.array(data["domain"]["min"]), np.array(data["domain"]["max"])
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    data["domain"] = {"min": list(centre - 2 * half), "max": list(centre + 2 * half)}
+    path = tmp_path / "wide.json"
+    path.write_text(json.dumps(data))
+    counts = {}
+    for crop in ("none", "auto", "hull"):
+        out = tmp_path / f"{crop}.ply"
+        status, err = run(capsys, "reconstruct", path, "-o", out, "--resolution", "32",
+                          "--crop", crop, "--quiet")
+        assert status == 0, err
+        mesh = trimesh.load(out)
+        facing = mesh.face_normals @ np.ones(3)
+        counts[crop] = len(mesh.faces)
+        if crop == "none":
+            assert np.mean(facing < 0) > 0.1
+        else:  # a rim the data's mean normal (not quite (1, 1, 1)) sees as its front
+            assert facing.min() > -0.1 and np.mean(facing < 0) < 0.01
+    assert counts["hull"] < counts["auto"] < counts["none"]
+
+
 def test_render_and_plot_are_pngs(first_run):
     for name in ("render.png", "plot.png"):
         data = (first_run / name).read_bytes()

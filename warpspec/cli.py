@@ -375,7 +375,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     progress.stage("meshing", "the zero set's triangles, the support map and the verdict")
-    result = solver.result(crop=args.crop == "auto")
+    # the hull is the data's seen along its normal: what lies behind the data goes first
+    result = solver.result(crop=args.crop in ("auto", "hull"))
     progress.done("meshing")
     verdict = result.verdict
     if not verdict.supported and not args.keep_unsupported:
@@ -692,11 +693,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="auto (default): crop an open surface that bends round (its "
                           "normals turn past 120 degrees) to where the data reaches (the "
                           "hull of the rays' hits and the points, unwrapped round the "
-                          "surface's axis), keep others whole; none: "
-                          "the whole "
-                          "zero set; hull: the faces inside the hull of the constraints; "
-                          "support: the faces "
-                          "within 3 voxels of a constraint (a ray's hit or a point)")
+                          "surface's axis); drop what lies behind a gentler one seen from "
+                          "one side; keep others whole; none: the whole zero set; hull: of "
+                          "what auto keeps, the faces inside the hull of the constraints; "
+                          "support: the faces within 3 voxels of a constraint "
+                          "(a ray's hit or a point)")
     rec.add_argument("--keep-unsupported", action="store_true",
                      help="write the outputs even when the data does not support the result "
                           "(most rays miss, the normals or the points disagree with the "

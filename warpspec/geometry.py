@@ -453,7 +453,7 @@ def crop_to_data_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarr
     _, _, vt = np.linalg.svd(a, full_matrices=False)
     for points, queries in ((a, x), (a @ vt[:2].T, x @ vt[:2].T)):
         keep &= _within_hull(points, queries, margin / scale)
-    return _keep_faces(vertices, faces, keep)
+    return keep_faces(vertices, faces, keep)
 
 
 WRAP_MIN_GAP_DEG = 30.0
@@ -529,7 +529,7 @@ def crop_to_unwrapped_hull(vertices: np.ndarray, faces: np.ndarray, anchors: np.
     scale = max(arc * 2.0 * np.pi, float(np.ptp(height))) or 1.0
     a = coordinates(anchors) / scale
     x = coordinates(np.asarray(vertices)[faces].mean(axis=1)) / scale
-    return _keep_faces(vertices, faces, _within_hull(a, x, margin / scale))
+    return keep_faces(vertices, faces, _within_hull(a, x, margin / scale))
 
 
 def _hull_anchors(anchors: np.ndarray) -> np.ndarray:
@@ -560,7 +560,7 @@ def _within_hull(points: np.ndarray, queries: np.ndarray, margin: float) -> np.n
     return keep
 
 
-def _keep_faces(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray
+def keep_faces(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """The faces ``keep`` marks, re-indexed; all of them when it marks none or all."""
     if not keep.any() or keep.all():

@@ -17,11 +17,12 @@ if TYPE_CHECKING:  # trimesh (and SciPy) load in ~0.6 s: only when a Trimesh is 
 __all__ = [
     "crop_to_support",
     "extract_mesh",
+    "faces_behind",
     "sample_trilinear",
     "supported_components",
     "triangulate",
     "triangulate_device",
-    "vertex_components",
+        "vertex_components",
     "write_ply",
 ]
 
@@ -348,6 +349,63 @@ def supported_components(vertices: np.ndarray, faces: np.ndarray, anchors: np.nd
     new_index = np.cumsum(keep_vertex) - 1
     keep_face = keep_vertex[faces[:, 0]]
     return vertices[keep_vertex], new_index[faces[keep_face]]
+
+
+FACING_CHUNK = 1 << 22
+"""Face-viewpoint pairs tested at once by :func:`faces_behind` (32 MiB of float64)."""
+
+
+def faces_behind(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *,
+                 radius: float, front: np.ndarray, viewpoints: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """The faces behind the data: turned away from its front, and in pieces far from it.
+
+    A face (normal ``n``, centre ``x``) is turned away when ``n . front <= 0``, or, with
+    ``viewpoints``, when no viewpoint ``c`` looks at its front side (``n . (c - x) <= 0`` for
+    every one). The faces turned away are grouped into connected pieces, and a piece is
+    behind the data when none of its vertices lies within ``radius`` of an anchor (a ray's
+    hit or a point). A piece that reaches the data is kept whole: a slope between two
+    highlights that the cameras see edge-on is part of what they saw.
+
+    Args:
+        vertices: ``(V, 3)`` vertex positions.
+        faces: ``(F, 3)`` vertex indices.
+        anchors: ``(A, 3)`` constraint positions.
+        radius: Distance within which a piece reaches the data.
+        front: The direction the data's side faces (the face normals' sense).
+        viewpoints: ``(C, 3)`` camera centres, looking at the side the normals point to.
+
+    Returns:
+        A boolean mask over the faces, ``True`` where a face lies behind the data.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    behind = np.zeros(len(faces), dtype=bool)
+    if len(faces) == 0 or len(anchors) == 0:
+        return behind
+    tri = vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    away = normal @ np.asarray(front, dtype=np.float64).reshape(3) <= 0.0
+    if viewpoints is not None and len(viewpoints):
+        viewpoints = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3)
+        level = np.einsum("ij,ij->i", normal, tri.mean(axis=1))
+        step = max(1, FACING_CHUNK // len(viewpoints))  # bounded memory: faces x viewpoints
+        for k in range(0, len(faces), step):
+            away[k:k + step] |= (np.max(normal[k:k + step] @ viewpoints.T, axis=1)
+                                 <= level[k:k + step])
+    if not away.any():
+        return behind
+    count, label = vertex_components(len(vertices), faces[away])
+    from scipy.spatial import cKDTree
+
+    near, _ = cKDTree(anchors).query(vertices, distance_upper_bound=radius)
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces[away].ravel()] = True
+    reaches = np.zeros(count, dtype=bool)
+    reaches[np.unique(label[used & np.isfinite(near)])] = True
+    behind[away] = ~reaches[label[faces[away][:, 0]]]
+    return behind
 
 
 def is_open(faces: np.ndarray) -> bool:

@@ -16,12 +16,13 @@ import warp as wp
 
 from .._runtime import init, resolve_device
 from ..errors import InputError, ReconstructionError
-from ..geometry import crop_to_data_hull, crop_to_unwrapped_hull
+from ..geometry import crop_to_data_hull, crop_to_unwrapped_hull, keep_faces
 from ..grid import Grid
 from ..implicit import rejected_summary
 from ..kernels.flow import launch_flow_step, launch_flow_step_band
 from ..kernels.measures import MEASURE_SLOTS
 from ..mesh import (
+    faces_behind,
     is_open,
     supported_components,
     triangulate,
@@ -379,15 +380,19 @@ class Reconstructor:
         if callback is not None:
             callback(m)
 
-    def _hit_normals(self, hits: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The finite hits, the scene's normals there, and which of them the fit kept."""
+    def _hit_normals(self, hits: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The finite hits, the scene's normals there, which the fit kept, their cameras.
+
+        The last is the centres of the cameras whose rays met the surface at the hits.
+        """
         ok = np.all(np.isfinite(hits), axis=1)
         kept = np.ones(len(hits), dtype=bool)
         if self.fit_report is not None:
             kept[self.fit_report.rejected] = False
         origins, dirs = self.scene.rays()
         normals = self.scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
-        return hits[ok], normals, kept[ok]
+        return hits[ok], normals, kept[ok], origins[ok]
 
     def _wraps_around(self, normals: np.ndarray, hits: np.ndarray) -> bool:
         """Whether the kept normals at the hits turn by more than :data:`TURN_DEG`.
@@ -405,13 +410,8 @@ class Reconstructor:
         the open surface is kept whole: its rims lie beyond the data by the curvature between
         far-apart constraints, and a crop would cut into them (the wine bottle's label).
         """
-        if len(normals) < 2:
+        if _gentle(normals):
             return False
-        cos_turn = np.cos(np.radians(TURN_DEG))
-        step = max(1, PAIR_CHUNK // len(normals))  # bounded memory: normals x normals
-        if all(np.min(normals[k:k + step] @ normals.T) >= cos_turn
-               for k in range(0, len(normals), step)):
-            return False  # a gentle patch
         # Around what axis, and how far: the empty arcs in the normals' principal plane.
         _, _, vt = np.linalg.svd(normals, full_matrices=False)
         widest, _ = _widest_arcs(normals @ vt[0], normals @ vt[1])
@@ -438,6 +438,41 @@ class Reconstructor:
         margin = max(margin, SUPPORT_RADIUS * self.grid.spacing)
         return crop_to_data_hull(vertices, faces, anchors, margin=margin)
 
+    def _seen_from_one_side(self) -> bool:
+        """Whether the start found the cameras in a half-space (its first guess a plane)."""
+        return self.fit_report is not None and self.fit_report.guess == "plane"
+
+    def _crop_behind(self, vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray,
+                     hits: np.ndarray, normals: np.ndarray, seen_from: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """Drop the surface behind a gentle patch seen from one side.
+
+        The fit's extrapolation may close behind the data (the octant's sphere, in a domain
+        that holds it); no constraint speaks for that side. The faces turned away from the
+        data's mean normal or from every camera, in pieces that come no nearer the data than
+        :data:`BEHIND_VOXELS`, are dropped (:func:`warpspec.mesh.faces_behind`). The mesh's
+        sense is the one the kept hits (``hits``, with the scene's ``normals`` there, seen
+        from the camera centres ``seen_from``) turn to their own cameras.
+        """
+        if len(hits) == 0:
+            return vertices, faces
+        from scipy.spatial import cKDTree
+
+        tri = vertices[faces]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        _, nearest = cKDTree(tri.mean(axis=1)).query(hits)
+        turned = np.einsum("ij,ij->i", normal[nearest], seen_from - hits)
+        oriented = faces if np.sum(np.sign(turned)) >= 0 else faces[:, ::-1]
+        behind = faces_behind(vertices, oriented, anchors, front=normals.mean(axis=0),
+                              viewpoints=self.scene.camera_centres(),
+                              radius=BEHIND_VOXELS * self.grid.spacing)
+        if not behind.any() or behind.all():
+            return vertices, faces
+        vertices, faces = keep_faces(vertices, np.asarray(faces), ~behind)
+        return supported_components(vertices, faces, anchors,
+                                    radius=SUPPORT_RADIUS * self.grid.spacing,
+                                    min_extent=SPECK_VOXELS * self.grid.spacing)
+
     @property
     def default_iterations(self) -> int:
         """Iterations of the flow the automatic schedule gives this grid."""
@@ -454,8 +489,10 @@ class Reconstructor:
                 (:func:`warpspec.geometry.crop_to_unwrapped_hull`); where the normals fix no
                 axis, inside their 3-D and 2-D hulls grown by :data:`CROP_MARGIN` of the
                 domain (:func:`warpspec.geometry.crop_to_data_hull`). Beyond them the surface
-                is the fit's extrapolation, which no constraint speaks for. A closed surface
-                is never cropped. ``False`` keeps the whole zero set.
+                is the fit's extrapolation, which no constraint speaks for. A gentler surface
+                seen from one side loses what lies behind the data (:meth:`_crop_behind`),
+                even when it is closed; any other closed surface is never cropped. ``False``
+                keeps the whole zero set.
 
         Raises:
             ReconstructionError: If the zero set has left the domain (no surface to mesh).
@@ -474,9 +511,12 @@ class Reconstructor:
         vertices, faces = supported_components(vertices, faces, anchors,
                                                radius=SUPPORT_RADIUS * self.grid.spacing,
                                                min_extent=SPECK_VOXELS * self.grid.spacing)
-        if crop and is_open(faces):
-            hit_points, normals, kept = self._hit_normals(hits)
-            if self._wraps_around(normals[kept], hit_points[kept]):
+        if crop and len(faces):
+            hit_points, normals, kept, seen_from = self._hit_normals(hits)
+            if self._seen_from_one_side() and _gentle(normals[kept]):
+                vertices, faces = self._crop_behind(vertices, faces, anchors, hit_points[kept],
+                                                    normals[kept], seen_from[kept])
+            elif is_open(faces) and self._wraps_around(normals[kept], hit_points[kept]):
                 vertices, faces = self._crop_round(vertices, faces, anchors, hit_points[kept],
                                                    normals[kept])
         rejected = ([] if self.fit_report is None
@@ -492,6 +532,16 @@ def _widest_arcs(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     angles = np.sort(np.arctan2(y, x))
     gaps = np.sort(np.diff(np.concatenate([angles, angles[:1] + 2.0 * np.pi])))
     return float(np.degrees(gaps[-1])), float(np.degrees(gaps[-2]) if len(gaps) > 1 else 0.0)
+
+
+def _gentle(normals: np.ndarray) -> bool:
+    """Whether no two of the unit ``normals`` are more than :data:`TURN_DEG` apart."""
+    if len(normals) < 2:
+        return True
+    cos_turn = np.cos(np.radians(TURN_DEG))
+    step = max(1, PAIR_CHUNK // len(normals))  # bounded memory: normals x normals
+    return all(np.min(normals[k:k + step] @ normals.T) >= cos_turn
+               for k in range(0, len(normals), step))
 
 
 TURN_DEG = 120.0
@@ -516,6 +566,10 @@ OPEN_ARC_RATIO = 1.5
 times the next (and wider than OPEN_ARC_DEG): the views of a tube seen all around, however
 few, space their arcs alike (the bottles' rings of cameras, seeds 0-5: at most 1.13 times);
 those of the patch wrapping 330 degrees leave 2.0-2.5 times (seeds 0-2)."""
+BEHIND_VOXELS = 3.0
+"""A piece of the surface that every camera sees from behind is dropped from a gentle patch
+seen from one side when it comes no nearer the data than this many voxels
+(:meth:`Reconstructor._crop_behind`)."""
 SPECK_VOXELS = 2.0
 """Pieces of the mesh whose bounding box is less than this many voxels across (its
 diagonal) are specks of the level set, not surfaces the grid resolves: they are dropped."""
