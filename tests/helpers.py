@@ -21,3 +21,34 @@ def interior(a: np.ndarray, width: int) -> np.ndarray:
     """The array without ``width`` nodes at every face."""
     w = width
     return a[w:-w, w:-w, w:-w]
+
+
+def turned(data: dict, rotation) -> dict:
+    """A scene dictionary turned by ``rotation`` (3x3) about the origin.
+
+    Cameras, lights and points turn with it; the domain becomes the box round the turned
+    one's corners (larger, unless the turn maps the axes onto each other).
+    """
+    import copy
+
+    R = np.asarray(rotation, dtype=np.float64)
+    out = copy.deepcopy(data)
+    back = np.eye(4)
+    back[:3, :3] = R.T  # a world point x' of the turned scene was R^T x' before
+
+    def light(spec: dict) -> dict:
+        return {k: (list(R @ np.asarray(v, dtype=np.float64))
+                    if k in ("direction", "position") else v) for k, v in spec.items()}
+
+    for camera in out["cameras"]:
+        camera["P"] = (np.asarray(camera["P"], dtype=np.float64) @ back).tolist()
+        if "light" in camera:
+            camera["light"] = light(camera["light"])
+    if "light" in out:
+        out["light"] = light(out["light"])
+    out["points"] = (np.asarray(out["points"], dtype=np.float64).reshape(-1, 3) @ R.T).tolist()
+    lo, hi = np.asarray(out["domain"]["min"]), np.asarray(out["domain"]["max"])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])]) @ R.T
+    out["domain"] = {"min": corners.min(axis=0).tolist(), "max": corners.max(axis=0).tolist()}
+    return out

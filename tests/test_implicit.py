@@ -1051,6 +1051,45 @@ def test_surrounds_agrees_with_the_linear_program_on_random_cameras():
     assert 20 < sum(answers) < 100  # both answers are tested
 
 
+def test_a_ray_entering_the_box_inside_a_quadric_and_again_later_is_entered_from_inside():
+    # q = -x^2 + y^2 + z^2 + 0.25 (its inside, q <= 0, two caps: |x| >= 0.5 on the axis):
+    # along +x from x = -3 a ray leaves the inside at x = -0.5 and enters again at 0.5
+    caps = Q.Quadric(np.array([-1.0, 1.0, 1.0, 0, 0, 0, 0, 0, 0, 0.25]), np.zeros(3), 1.0)
+    origins = np.array([[-3.0, 0.0, 0.0], [-3.0, 3.0, 0.0]])
+    dirs = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    far = caps.entered_from_inside(origins, dirs, np.full(3, -1.0), np.full(3, 4.0))
+    assert far.tolist() == [True, False]  # the second, at y = 3, enters once, at x = 3.04
+    near = caps.entered_from_inside(origins, dirs, np.array([0.0, -1.0, -1.0]), np.full(3, 4.0))
+    assert near.tolist() == [False, False]  # the box begins between the caps, outside
+    ball = Q.sphere(np.zeros(3), 1.0, frame_centre=np.zeros(3), scale=1.0)
+    # the box cuts the ball: the ray enters it inside, but only leaves it
+    assert not ball.entered_from_inside(origins[:1], dirs[:1], np.array([-0.5, -2, -2]),
+                                        np.full(3, 2.0)).any()
+
+
+def test_the_octant_turned_in_a_wider_domain_is_the_sphere_the_cameras_see_from_outside():
+    """Turned (a fixed random turn), the octant's box round the turned domain holds more of
+    the sphere. The quadric fitted from the plane met every normal within 3 degrees (the
+    median 0.4), but 4 of the 24 rays reached their hits through its inside: taken as the
+    first of equals, the hits lay 0.17-1.2 from the centre and the verdict refused it. The
+    spheres' fits meet every normal exactly, and no ray enters them from inside."""
+    from .helpers import turned
+
+    w, x, y, z = np.random.default_rng(1).normal(size=4) / np.linalg.norm(
+        np.random.default_rng(1).normal(size=4))
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    data = turned(make_scene("octant").scene().to_dict(), R)
+    result = ws.reconstruct(ws.Scene.from_dict(data), resolution=64, device="cpu")
+    assert result.verdict.supported
+    h = result.grid.spacing
+    assert np.all(np.abs(np.linalg.norm(result.hits, axis=1) - 1.0) < 0.1 * h)
+    v = result.vertices[np.linalg.norm(result.vertices - R @ np.ones(3) / np.sqrt(3),
+                                       axis=1) < 0.8]
+    assert np.abs(np.linalg.norm(v, axis=1) - 1.0).mean() < 0.05 * h
+
+
 def test_columns_sweep_the_box_and_find_a_second_sheet():
     from warpspec.implicit import columns
 

@@ -1305,7 +1305,11 @@ class ImplicitStart:
         the same centre, encloses a boxed object, and the fit from outside it meets every true
         normal there. A patch seen from one side may also be curved like a sphere seen
         from outside, so there the sphere through the points is a start too. On every other
-        scene of the catalogue every start meets the same share.
+        scene of the catalogue every start meets the same share. Of fits that meet as many,
+        the one fewest rays enter from inside (:meth:`Quadric.entered_from_inside`) is taken:
+        the octant, turned in a domain that holds more of its sphere, was met as well by a
+        quadric from the plane (every normal within 3 degrees, the median 0.4) that 4 of its
+        24 rays reached through its inside, where the spheres' fits met them exactly.
 
         Returns:
             The quadric, the rays' robust weights and their misses in degrees.
@@ -1318,7 +1322,9 @@ class ImplicitStart:
         starts.append(self._wide_sphere(ball.centre))
         fits = [Q.fit_quadric(self.scene, start, lo=lo, hi=hi, voxel=self.grid.spacing)
                 for start in starts]
-        return max(fits, key=lambda fit: _met(fit[2]))
+        rays = self.scene.rays()
+        return max(fits, key=lambda fit: (
+            _met(fit[2]), -int(fit[0].entered_from_inside(*rays, lo, hi).sum())))
 
     def _wide_sphere(self, centre: np.ndarray) -> Q.Quadric:
         """A sphere about ``centre`` as wide as the domain (radius half its longest side)."""

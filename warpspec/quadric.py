@@ -121,6 +121,21 @@ class Quadric:
         anchors = self.centre + self.scale * (o + np.nan_to_num(t)[:, None] * d)
         return anchors, crossing, inside_box
 
+    def entered_from_inside(self, origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray,
+                            hi: np.ndarray) -> np.ndarray:
+        """Whether each ray enters the box inside ``q < 0`` and crosses into it again later.
+
+        Such a ray's entry (:meth:`intersect`) lies behind a sheet of the quadric that it
+        leaves the inside through first: its camera would look from within the object.
+        """
+        A, b, c = self.matrix()
+        o = (origins - self.centre) / self.scale
+        t0, _ = _slab(o, dirs, (lo - self.centre) / self.scale, (hi - self.centre) / self.scale)
+        x = o + t0[:, None] * dirs
+        q0 = np.einsum("ij,jk,ik->i", x, A, x) + x @ b + c
+        _, crossing, inside_box = self.intersect(origins, dirs, lo, hi)
+        return crossing & inside_box & (q0 < 0.0)
+
     def sheets_crossed(self, origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray,
                        hi: np.ndarray) -> int:
         """Most roots of ``q`` that one ray meets inside the box (0, 1 or 2)."""
