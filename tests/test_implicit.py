@@ -789,6 +789,10 @@ def test_the_faces_behind_the_data_are_those_no_camera_looks_at_far_from_it():
     assert np.array_equal(alone, n_z <= 0.0)
     flipped = faces_behind(v, f[:, ::-1], anchors, radius=0.1, front=[0, 0, -1])
     assert np.array_equal(flipped, alone)
+    # the windings reversed, their sense told by the anchors seen from the camera
+    seen = (anchors, np.repeat(camera, len(anchors), axis=0))
+    assert np.array_equal(faces_behind(v, f[:, ::-1], anchors, radius=0.1, front=[0, 0, 1],
+                                       viewpoints=camera, seen=seen), behind)
     # an anchor on the back: the piece turned away reaches the data and is kept whole
     back = np.vstack([anchors, [[0.0, 0.0, -1.0]]])
     assert not faces_behind(v, f, back, radius=0.1, front=[0, 0, 1], viewpoints=camera).any()

@@ -561,7 +561,7 @@ def _within_hull(points: np.ndarray, queries: np.ndarray, margin: float) -> np.n
 
 
 def keep_faces(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, np.ndarray]:
     """The faces ``keep`` marks, re-indexed; all of them when it marks none or all."""
     if not keep.any() or keep.all():
         return vertices, faces

@@ -22,7 +22,7 @@ __all__ = [
     "supported_components",
     "triangulate",
     "triangulate_device",
-        "vertex_components",
+    "vertex_components",
     "write_ply",
 ]
 
@@ -356,8 +356,8 @@ FACING_CHUNK = 1 << 22
 
 
 def faces_behind(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *,
-                 radius: float, front: np.ndarray, viewpoints: np.ndarray | None = None
-                 ) -> np.ndarray:
+                 radius: float, front: np.ndarray, viewpoints: np.ndarray | None = None,
+                 seen: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The faces behind the data: turned away from its front, and in pieces far from it.
 
     A face (normal ``n``, centre ``x``) is turned away when ``n . front <= 0``, or, with
@@ -372,8 +372,11 @@ def faces_behind(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *
         faces: ``(F, 3)`` vertex indices.
         anchors: ``(A, 3)`` constraint positions.
         radius: Distance within which a piece reaches the data.
-        front: The direction the data's side faces (the face normals' sense).
-        viewpoints: ``(C, 3)`` camera centres, looking at the side the normals point to.
+        front: The direction the data's side faces.
+        viewpoints: ``(C, 3)`` camera centres.
+        seen: Hits ``(K, 3)`` and the centres of the cameras that saw them ``(K, 3)``: the
+            normals' sense is the one the faces nearest the hits turn to those cameras (the
+            majority). Without it, the windings' own.
 
     Returns:
         A boolean mask over the faces, ``True`` where a face lies behind the data.
@@ -384,8 +387,15 @@ def faces_behind(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *
     behind = np.zeros(len(faces), dtype=bool)
     if len(faces) == 0 or len(anchors) == 0:
         return behind
+    from scipy.spatial import cKDTree
+
     tri = vertices[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    if seen is not None and len(seen[0]):
+        hits, cameras = (np.asarray(a, dtype=np.float64).reshape(-1, 3) for a in seen)
+        _, nearest = cKDTree(tri.mean(axis=1)).query(hits)
+        if np.sum(np.sign(np.einsum("ij,ij->i", normal[nearest], cameras - hits))) < 0:
+            normal = -normal
     away = normal @ np.asarray(front, dtype=np.float64).reshape(3) <= 0.0
     if viewpoints is not None and len(viewpoints):
         viewpoints = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3)
@@ -397,8 +407,6 @@ def faces_behind(vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray, *
     if not away.any():
         return behind
     count, label = vertex_components(len(vertices), faces[away])
-    from scipy.spatial import cKDTree
-
     near, _ = cKDTree(anchors).query(vertices, distance_upper_bound=radius)
     used = np.zeros(len(vertices), dtype=bool)
     used[faces[away].ravel()] = True

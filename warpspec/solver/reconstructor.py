@@ -456,19 +456,19 @@ class Reconstructor:
         """
         if len(hits) == 0:
             return vertices, faces
-        from scipy.spatial import cKDTree
-
-        tri = vertices[faces]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        _, nearest = cKDTree(tri.mean(axis=1)).query(hits)
-        turned = np.einsum("ij,ij->i", normal[nearest], seen_from - hits)
-        oriented = faces if np.sum(np.sign(turned)) >= 0 else faces[:, ::-1]
-        behind = faces_behind(vertices, oriented, anchors, front=normals.mean(axis=0),
-                              viewpoints=self.scene.camera_centres(),
+        behind = faces_behind(vertices, faces, anchors, front=normals.mean(axis=0),
+                              viewpoints=self.scene.camera_centres(), seen=(hits, seen_from),
                               radius=BEHIND_VOXELS * self.grid.spacing)
         if not behind.any() or behind.all():
             return vertices, faces
-        vertices, faces = keep_faces(vertices, np.asarray(faces), ~behind)
+        return self._pieces(*keep_faces(vertices, faces, ~behind), anchors)
+
+    def _pieces(self, vertices: np.ndarray, faces: np.ndarray, anchors: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh without its pieces far from the data, and without specks.
+
+        See :func:`warpspec.mesh.supported_components`.
+        """
         return supported_components(vertices, faces, anchors,
                                     radius=SUPPORT_RADIUS * self.grid.spacing,
                                     min_extent=SPECK_VOXELS * self.grid.spacing)
@@ -508,9 +508,7 @@ class Reconstructor:
             vertices, faces = triangulate(phi, self.grid)
         anchors = np.vstack([hits[np.all(np.isfinite(hits), axis=1)],
                              self.scene.points.reshape(-1, 3)])
-        vertices, faces = supported_components(vertices, faces, anchors,
-                                               radius=SUPPORT_RADIUS * self.grid.spacing,
-                                               min_extent=SPECK_VOXELS * self.grid.spacing)
+        vertices, faces = self._pieces(vertices, faces, anchors)
         if crop and len(faces):
             hit_points, normals, kept, seen_from = self._hit_normals(hits)
             if self._seen_from_one_side() and _gentle(normals[kept]):
@@ -567,9 +565,9 @@ times the next (and wider than OPEN_ARC_DEG): the views of a tube seen all aroun
 few, space their arcs alike (the bottles' rings of cameras, seeds 0-5: at most 1.13 times);
 those of the patch wrapping 330 degrees leave 2.0-2.5 times (seeds 0-2)."""
 BEHIND_VOXELS = 3.0
-"""A piece of the surface that every camera sees from behind is dropped from a gentle patch
-seen from one side when it comes no nearer the data than this many voxels
-(:meth:`Reconstructor._crop_behind`)."""
+"""A piece of the surface turned away from the data (from the kept rays' mean normal, or from
+every camera) is dropped from a gentle patch seen from one side when it comes no nearer the
+data than this many voxels (:meth:`Reconstructor._crop_behind`)."""
 SPECK_VOXELS = 2.0
 """Pieces of the mesh whose bounding box is less than this many voxels across (its
 diagonal) are specks of the level set, not surfaces the grid resolves: they are dropped."""
