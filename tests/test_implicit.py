@@ -1177,6 +1177,50 @@ def test_a_torus_seen_only_from_above_is_still_a_torus():
     assert np.abs(t.implicit(result.vertices)).mean() < 0.3 * result.grid.spacing
 
 
+def _points_moved(synthetic, sigma_voxels: float, seed: int = 77) -> ws.Scene:
+    """``synthetic``'s scene with its points moved by Gaussian noise, per axis, in voxels at
+    resolution 64."""
+    scene = synthetic.scene()
+    data = scene.to_dict()
+    h = float(np.max(np.subtract(scene.domain[1], scene.domain[0]))) / 64
+    pts = np.asarray(scene.points, dtype=float)
+    noise = sigma_voxels * h * np.random.default_rng(seed).standard_normal(pts.shape)
+    data["points"] = (pts + noise).tolist()
+    return ws.Scene.from_dict(data)
+
+
+@pytest.mark.parametrize("name", ["sphere-around", "ellipsoid-around"])
+def test_points_scattered_by_half_a_voxel_let_the_quadric_follow_the_normals(name):
+    """Six points moved by noise of half a voxel per axis. Held nearly exactly, they bent the
+    quadric off the normals: the sphere by flash missed them by 1.69 degrees (median) and came
+    out 0.36 voxel from the truth on average; the ellipsoid under lamps, 2.59, was refused.
+    Refitted with the points weighed as noisy, each meets them within a quarter degree and is
+    the start, and the sphere lies within 0.08 voxel."""
+    synthetic = make_scene(name, seed=0)
+    solver = ws.Reconstructor(_points_moved(synthetic, 0.5), resolution=64, device="cpu")
+    report = solver.fit_report
+    assert report.shape == "quadric"
+    assert np.median(report.residual_deg[report.weights > 0]) < 0.3
+    if name == "sphere-around":
+        solver.run(20)
+        result = solver.result()
+        distance = np.abs(synthetic.surface.signed_distance(result.vertices))
+        assert distance.mean() < 0.15 * result.grid.spacing
+
+
+def test_exact_points_keep_the_quadric_that_holds_them():
+    """With exact points and a pixel of noise on the highlights, the refit that weighs the
+    points as noisy meets the normals about as well (0.23 degrees against 0.26 on the sphere),
+    and the quadric that holds the points exactly stays the start: they fix its depth."""
+    scene = make_scene("sphere-around", seed=0, noise=1.0).scene()
+    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
+    fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))
+    assert fit.run(wp.zeros(grid.shape, dtype=float, device="cpu")).shape == "quadric"
+    q, pts = fit.quadric, scene.points.reshape(-1, 3)
+    distance = np.abs(q.value(pts)) / np.linalg.norm(q.gradient(pts), axis=1) * q.scale
+    assert distance.max() < 0.01 * grid.spacing
+
+
 def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_near():
     """The points' test of a closed-form start: their median distance within 1.5/64 of the
     domain's size and four in five within 3/64, so points scattered by their noise pass, and

@@ -25,7 +25,12 @@ ROUNDS = 25
 """Intersect-and-refit rounds."""
 POINT_WEIGHT = 30.0
 """Weight of ``q(y)^2 / |grad q(y)|^2`` at a point (per voxel width), against a unit normal
-error."""
+error: points held nearly exactly (a point a voxel off weighs as much as a normal 5.5 radians
+off)."""
+NOISY_POINT_WEIGHT = 1e-3
+"""The same weight for points that carry noise: a point 0.55 voxel off weighs as much as a
+normal a degree off, the two noises of structure from motion's points and of the highlights'
+normals. See :data:`warpspec.implicit.NOISY_POINT_GAIN` for when it is used."""
 MISS_WEIGHT = 0.3
 """Relative weight of a ray that misses the current quadric."""
 POINT_DAMPING = 0.5
@@ -232,7 +237,8 @@ def height_map(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def solve_quadric(points: np.ndarray, anchors: np.ndarray, normals: np.ndarray,
                   weights: np.ndarray, *, centre: np.ndarray, scale: float, voxel: float,
-                  space: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                  space: tuple[np.ndarray, np.ndarray] | None = None,
+                  point_weight: float = POINT_WEIGHT) -> np.ndarray:
     """One weighted least-squares fit of the coefficients (normalised coordinates).
 
     Gradients must be parallel to the normals (two tangential equations per ray); one equation
@@ -255,7 +261,7 @@ def solve_quadric(points: np.ndarray, anchors: np.ndarray, normals: np.ndarray,
     if len(points):
         y = (points - centre) / scale
         # q(y) / |grad q| is the first-order distance; |grad q| ~ 1 after the scale row
-        pw = np.sqrt(POINT_WEIGHT) * scale / voxel
+        pw = np.sqrt(point_weight) * scale / voxel
         rows.append(pw * _value_rows(y))
         rhs.append(np.zeros(len(y)))
     M = np.vstack(rows)
@@ -274,12 +280,14 @@ def solve_quadric(points: np.ndarray, anchors: np.ndarray, normals: np.ndarray,
 
 def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
                 robust_from: int = 3, frame: np.ndarray | None = None,
-                use: np.ndarray | None = None) -> tuple[Quadric, np.ndarray, np.ndarray]:
+                use: np.ndarray | None = None, point_weight: float = POINT_WEIGHT
+                ) -> tuple[Quadric, np.ndarray, np.ndarray]:
     """Alternate intersection and fit from ``initial``.
 
     With ``frame`` (rows: the plane's two axes and its normal) the quadric is restricted to the
     quadratic height fields over that plane (:func:`height_map`). With ``use`` (a mask of the
     rays, ``(M,)``) only those rays are fitted; every ray's residual is measured.
+    ``point_weight``: the points' weight (:data:`POINT_WEIGHT`, :data:`NOISY_POINT_WEIGHT`).
 
     Returns:
         The quadric, each ray's robust weight ``(M,)`` and residual angle in degrees ``(M,)``.
@@ -309,7 +317,8 @@ def fit_quadric(scene, initial: Quadric, *, lo: np.ndarray, hi: np.ndarray, voxe
         w = weights * np.where(crossing, 1.0, MISS_WEIGHT)
         coeffs = solve_quadric(scene.points.reshape(-1, 3), anchors[fitted], normals[fitted],
                                w[fitted], centre=quad.centre, scale=quad.scale, voxel=voxel,
-                               space=None if frame is None else height_map(frame))
+                               space=None if frame is None else height_map(frame),
+                               point_weight=point_weight)
         if damping and round_ >= robust_from:
             before, after = (c / np.linalg.norm(c) for c in (quad.coeffs, coeffs))
             before = before if before @ after >= 0.0 else -before
