@@ -52,3 +52,16 @@ def turned(data: dict, rotation) -> dict:
                         for z in (lo[2], hi[2])]) @ R.T
     out["domain"] = {"min": corners.min(axis=0).tolist(), "max": corners.max(axis=0).tolist()}
     return out
+
+
+def points_moved(scene, sigma_voxels: float, *, seed: int = 77):
+    """``scene`` (a :class:`warpspec.Scene`) with its points moved by Gaussian noise, per axis,
+    of ``sigma_voxels`` voxel widths at resolution 64; a new scene."""
+    import warpspec as ws
+
+    data = scene.to_dict()
+    h = float(np.max(np.subtract(scene.domain[1], scene.domain[0]))) / 64
+    pts = np.asarray(scene.points, dtype=np.float64)
+    noise = sigma_voxels * h * np.random.default_rng(seed).standard_normal(pts.shape)
+    data["points"] = (pts + noise).tolist()
+    return ws.Scene.from_dict(data)

@@ -1177,18 +1177,6 @@ def test_a_torus_seen_only_from_above_is_still_a_torus():
     assert np.abs(t.implicit(result.vertices)).mean() < 0.3 * result.grid.spacing
 
 
-def _points_moved(synthetic, sigma_voxels: float, seed: int = 77) -> ws.Scene:
-    """``synthetic``'s scene with its points moved by Gaussian noise, per axis, in voxels at
-    resolution 64."""
-    scene = synthetic.scene()
-    data = scene.to_dict()
-    h = float(np.max(np.subtract(scene.domain[1], scene.domain[0]))) / 64
-    pts = np.asarray(scene.points, dtype=float)
-    noise = sigma_voxels * h * np.random.default_rng(seed).standard_normal(pts.shape)
-    data["points"] = (pts + noise).tolist()
-    return ws.Scene.from_dict(data)
-
-
 @pytest.mark.parametrize("name", ["sphere-around", "ellipsoid-around"])
 def test_points_scattered_by_half_a_voxel_let_the_quadric_follow_the_normals(name):
     """Six points moved by noise of half a voxel per axis. Held nearly exactly, they bent the
@@ -1196,8 +1184,11 @@ def test_points_scattered_by_half_a_voxel_let_the_quadric_follow_the_normals(nam
     out 0.36 voxel from the truth on average; the ellipsoid under lamps, 2.59, was refused.
     Refitted with the points weighed as noisy, each meets them within a quarter degree and is
     the start, and the sphere lies within 0.08 voxel."""
+    from .helpers import points_moved
+
     synthetic = make_scene(name, seed=0)
-    solver = ws.Reconstructor(_points_moved(synthetic, 0.5), resolution=64, device="cpu")
+    solver = ws.Reconstructor(points_moved(synthetic.scene(), 0.5), resolution=64,
+                              device="cpu")
     report = solver.fit_report
     assert report.shape == "quadric"
     assert np.median(report.residual_deg[report.weights > 0]) < 0.3
