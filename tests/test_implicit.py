@@ -222,7 +222,7 @@ def test_the_quadric_fit_recovers_quadric_scenes_exactly(name):
              Q.plane(guess.centre, guess.normal, frame_centre=frame, scale=scale))
     quad, weights, angle = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
     truth = synthetic.truth_points
-    dist = np.abs(quad.value(truth)) / np.linalg.norm(quad.gradient(truth), axis=1) * scale
+    dist = quad.distance(truth)
     assert dist.max() < 1e-3 * grid.spacing
     assert np.all(weights > 0) and angle.max() < 0.01
 
@@ -238,7 +238,7 @@ def test_the_quadric_fit_rejects_false_highlights():
     quad, weights, _ = Q.fit_quadric(scene, start, lo=lo, hi=hi, voxel=grid.spacing)
     assert np.array_equal(weights == 0, synthetic.outlier_mask)
     inliers = synthetic.truth_points[~synthetic.outlier_mask]
-    dist = np.abs(quad.value(inliers)) / np.linalg.norm(quad.gradient(inliers), axis=1) * scale
+    dist = quad.distance(inliers)
     assert dist.max() < 1e-3 * grid.spacing
 
 
@@ -267,7 +267,7 @@ def test_the_quadric_fit_to_some_rays_measures_every_ray():
     assert np.array_equal(weights > 0, true)
     assert angle[true].max() < 0.01 and angle[~true].min() > 14.0
     inliers = synthetic.truth_points[true]
-    dist = np.abs(quad.value(inliers)) / np.linalg.norm(quad.gradient(inliers), axis=1) * scale
+    dist = quad.distance(inliers)
     assert dist.max() < 1e-3 * grid.spacing
 
 
@@ -293,7 +293,7 @@ def test_a_flat_object_is_found_despite_its_start_and_false_highlights(seed, con
     assert np.array_equal(report.weights == 0, synthetic.outlier_mask)
     truth = synthetic.truth_points[~synthetic.outlier_mask]
     quad = start.quadric
-    dist = np.abs(quad.value(truth)) / np.linalg.norm(quad.gradient(truth), axis=1) * scale
+    dist = quad.distance(truth)
     assert dist.max() < 0.01 * grid.spacing
 
 
@@ -1207,9 +1207,7 @@ def test_exact_points_keep_the_quadric_that_holds_them():
     grid = Grid.from_bounds(*scene.bounds(), resolution=64)
     fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))
     assert fit.run(wp.zeros(grid.shape, dtype=float, device="cpu")).shape == "quadric"
-    q, pts = fit.quadric, scene.points.reshape(-1, 3)
-    distance = np.abs(q.value(pts)) / np.linalg.norm(q.gradient(pts), axis=1) * q.scale
-    assert distance.max() < 0.01 * grid.spacing
+    assert fit.quadric.distance(scene.points.reshape(-1, 3)).max() < 0.01 * grid.spacing
 
 
 def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_near():

@@ -1347,21 +1347,21 @@ class ImplicitStart:
                 for start in starts]
         rays = self.scene.rays()
         return self._noisy_points_fit(max(fits, key=lambda fit: (
-            _met(fit[2]), -int(fit[0].entered_from_inside(*rays, lo, hi).sum()))))
+            _met(fit[2]), -int(fit[0].entered_from_inside(*rays, lo, hi).sum()))), rays)
 
-    def _noisy_points_fit(self, fit: tuple[Q.Quadric, np.ndarray, np.ndarray]
+    def _noisy_points_fit(self, fit: tuple[Q.Quadric, np.ndarray, np.ndarray],
+                          rays: tuple[np.ndarray, np.ndarray]
                           ) -> tuple[Q.Quadric, np.ndarray, np.ndarray]:
         """``fit``, or its refit with the points weighed as noisy where that is the start.
 
         The refit (from ``fit``, the points at :data:`~warpspec.quadric.NOISY_POINT_WEIGHT`)
         is taken when it is the start by itself (:meth:`_quadric_suffices`), ``fit``'s median
         normal miss is NOISY_POINT_DEG or more, and the refit's at most NOISY_POINT_GAIN times
-        it.
+        it. ``rays``: the scene's (origins, directions).
         """
         if not self.scene.num_points:
             return fit
         lo, hi = self.grid.origin, self.grid.upper
-        rays = self.scene.rays()
         loose = Q.fit_quadric(self.scene, fit[0], lo=lo, hi=hi, voxel=self.grid.spacing,
                               point_weight=Q.NOISY_POINT_WEIGHT)
         inside = [f[0].intersect(*rays, lo, hi)[2] for f in (fit, loose)]
@@ -1426,10 +1426,8 @@ class ImplicitStart:
         ``fit`` (a quadric, its weights and residuals) is judged instead of the one taken.
         """
         quad, residual = (self.quadric, self.residual) if fit is None else (fit[0], fit[2])
-        pts = self.scene.points.reshape(-1, 3)
-        g = np.linalg.norm(quad.gradient(pts), axis=1)
-        dist = np.abs(quad.value(pts)) / np.maximum(g, 1e-300) * quad.scale
-        return self._shape_suffices(residual[inside], dist)
+        return self._shape_suffices(residual[inside],
+                                    quad.distance(self.scene.points.reshape(-1, 3)))
 
     def _shape_suffices(self, residual: np.ndarray, point_distance: np.ndarray) -> bool:
         """Whether a closed-form shape (a quadric, a torus) is the start by itself.

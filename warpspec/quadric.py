@@ -86,6 +86,11 @@ class Quadric:
         x = (np.asarray(world, dtype=np.float64) - self.centre) / self.scale
         return 2.0 * x @ A + b
 
+    def distance(self, world: np.ndarray) -> np.ndarray:
+        """``|q| / |grad q|`` at world points: their first-order distance from ``q = 0``."""
+        g = np.linalg.norm(self.gradient(world), axis=1)
+        return np.abs(self.value(world)) / np.maximum(g, 1e-300) * self.scale
+
     def intersect(self, origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """First entry of each ray into ``q <= 0`` inside the box, or its nearest approach.
