@@ -227,6 +227,66 @@ def test_under_lamps_the_rays_hits_hold_the_body_between_the_points():
     assert radius_error(heights[0], heights[-1]).max() < 2.0
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_under_lamps_points_weighed_as_noisy_leave_the_profile_to_the_rays(seed):
+    """Six points moved by noise of half a voxel per axis, exact highlights, fitted from the
+    true axis. Held exactly (POINT_WEIGHT), the points pull the profile off the truth (0.32 and
+    1.17 voxels on average at the true highlights); weighed as noisy (NOISY_POINT_WEIGHT), the
+    rays' hits give every radius, within 0.01 voxel, and the points lie 0.4 voxel off."""
+    from .helpers import points_moved
+
+    synthetic = make_scene("bottle-lamps", seed=seed)
+    scene = points_moved(synthetic.scene(), 0.5)
+    truth = synthetic.surface
+    origins, dirs = scene.rays()
+    lo, hi = scene.domain
+    voxel = Grid.from_bounds(lo, hi, resolution=64).spacing
+    normals = scene.normals(synthetic.truth_points)
+    error = {}
+    for weight in (R.POINT_WEIGHT, R.NOISY_POINT_WEIGHT):
+        surface = R.fit_revolution_lit(origins, dirs, normals, scene.points, lo=lo, hi=hi,
+                                       voxel=voxel, axis=(truth.base, truth.axis),
+                                       tilted=False, point_weight=weight)
+        error[weight] = np.abs(surface.value(synthetic.truth_points)).mean() / voxel
+    assert error[R.POINT_WEIGHT] > 0.2
+    assert error[R.NOISY_POINT_WEIGHT] < 0.05
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_under_lamps_points_scattered_by_half_a_voxel_are_not_held_exactly(seed):
+    """The whole start, points moved as above. Held exactly, they bent the profile: seed 0's
+    shape missed the normals by a median of 0.55 degrees, seed 2's by 0.38 (0.18 voxel from
+    the truth after one iteration), and seed 1's fits met only 67% of them within 3 degrees,
+    so none was the start. Refitted with the points weighed as noisy, the surface of
+    revolution is the start, meets the normals within 0.2 degree (0.13-0.15) and lies within
+    0.05 voxel of the truth after one iteration (0.016-0.033)."""
+    from .helpers import points_moved
+
+    synthetic = make_scene("bottle-lamps", seed=seed)
+    solver = ws.Reconstructor(points_moved(synthetic.scene(), 0.5), resolution=64,
+                              device="cpu")
+    report = solver.fit_report
+    assert report.shape == "revolution"
+    assert np.median(report.residual_deg[report.weights > 0]) < 0.2
+    _, err = _run(synthetic, solver, 1)
+    assert err < 0.05
+
+
+def test_under_lamps_exact_points_keep_the_profile_that_holds_them():
+    """Exact points, a pixel of noise on the highlights: the refit with the points weighed as
+    noisy meets the normals no closer (a median of 0.61 degrees against 0.69), and the profile
+    that holds the points exactly stays the start (within 0.0002 voxel of them; the refit
+    holds them at 0.18, the median)."""
+    from warpspec.implicit import ImplicitStart
+    from warpspec.solver import initial_plane
+
+    scene = make_scene("bottle-lamps", seed=0, noise=1.0).scene()
+    grid = Grid.from_bounds(*scene.bounds(), resolution=64)
+    fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))
+    assert fit.run(wp.zeros(grid.shape, dtype=float, device="cpu")).shape == "revolution"
+    assert np.abs(fit.revolution.value(scene.points)).max() < 0.05 * grid.spacing
+
+
 @pytest.mark.parametrize("tilted", [True, False])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_under_lamps_the_axis_is_the_one_that_makes_one_smooth_profile(seed, tilted):

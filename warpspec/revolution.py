@@ -37,6 +37,7 @@ import numpy as np
 
 from .geometry import angle_deg, miss_deg, plane_frame
 from .normal_lines import best_axis, first_crossing
+from .quadric import NOISY_POINT_WEIGHT as NOISY_QUADRIC_POINT_WEIGHT
 from .quadric import biweight, robust_sigma
 
 __all__ = ["SurfaceOfRevolution", "fit_revolution", "fit_revolution_lit"]
@@ -68,6 +69,12 @@ PROFILE_SMOOTHNESS = 1e-6
 POINT_WEIGHT = 20.0
 """Weight of a point's radius error in voxels, against 1 for a unit error of a line's slope,
 under lamps (the axis' cost and the final profile)."""
+NOISY_POINT_WEIGHT = float(np.sqrt(NOISY_QUADRIC_POINT_WEIGHT))
+"""The same weight for points that carry noise, as the quadric weighs them
+(:data:`warpspec.quadric.NOISY_POINT_WEIGHT`): a point 0.55 voxel off weighs as much as a
+slope a degree off. Under lamps each ray's hit gives the profile's radius, so the points need
+not fix the depth. See :meth:`warpspec.implicit.ImplicitStart._noisy_points_revolution` for
+when it is used."""
 PROFILE_POINT_WEIGHT = 0.5
 """The same weight in the profile's fit to flash-lit lines. Two points at nearly one height
 whose radii differ by a fraction of a voxel (an axis a tenth of a degree off puts them so) ask
@@ -545,7 +552,8 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
                  p: np.ndarray, n: np.ndarray, *, scale: float, voxel: float,
                  normals: np.ndarray | None = None, radii: np.ndarray | None = None,
                  radius_data: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                 leave_out: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+                 leave_out: bool = False, point_weight: float = POINT_WEIGHT
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The profile's radii: points' radii, the rays' normals where they meet it, smooth.
 
     Rays ``p + s n`` (``n`` inward) are traced to the current profile; the outward normal
@@ -556,7 +564,8 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
     By flash (no ``normals``: the rays are normal lines) the third-order energy is measured
     along the profile (:func:`_arc_length_weights`) and the points weigh
     :data:`PROFILE_POINT_WEIGHT`. Under lamps a ray's hit moves with the profile: there the
-    energy is measured along the axis and the points weigh :data:`POINT_WEIGHT`, as in the
+    energy is measured along the axis and the points weigh ``point_weight`` (:data:`POINT_WEIGHT`
+    unless they are noisy), as in the
     axis' cost (a coarse grid's profile drawn steeper met fewer normals, bottle-lamps at
     resolution 32: 2 of 6 seeds lost; at weight 2 a quarter false on seed 3 came out 0.13 h
     from the clean result, 0.09 at 20). Either way the flatness (:data:`FLATNESS`) holds the
@@ -574,7 +583,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
     weights = np.ones(len(p))
     far = 2.0 * scale
     flash = normals is None
-    points = _point_rows(ph, prho, (PROFILE_POINT_WEIGHT if flash else POINT_WEIGHT) / voxel,
+    points = _point_rows(ph, prho, (PROFILE_POINT_WEIGHT if flash else point_weight) / voxel,
                          voxel)
     if radius_data is not None:
         points = tuple(np.r_[x, y] for x, y in zip(points, radius_data, strict=True))
@@ -624,8 +633,8 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
 @_finite_or_none
 def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
                        points: np.ndarray, *, lo: np.ndarray, hi: np.ndarray, voxel: float,
-                       axis: tuple[np.ndarray, np.ndarray], tilted: bool = True
-                       ) -> SurfaceOfRevolution | None:
+                       axis: tuple[np.ndarray, np.ndarray], tilted: bool = True,
+                       point_weight: float = POINT_WEIGHT) -> SurfaceOfRevolution | None:
     """Fit a surface of revolution to rays whose normals are known but are no normal lines.
 
     Under a light that is not at the camera a ray is not a normal line, but given the axis
@@ -648,6 +657,7 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
         axis: A first guess of the axis (a point, a unit direction).
         tilted: Also start from the :data:`LIT_STARTS` tilted directions (``False``: refine
             ``axis`` alone, when it is already near).
+        point_weight: The points' weight (:data:`POINT_WEIGHT`, :data:`NOISY_POINT_WEIGHT`).
 
     Returns:
         The surface, or ``None`` when fewer than :data:`MIN_RAYS` rays or no point are given.
@@ -660,7 +670,7 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
         return None
     scale = float(np.max(np.asarray(hi) - np.asarray(lo)))
     data = {"o": o, "d": d, "nrm": nrm, "pts": pts, "lo": lo, "hi": hi, "voxel": voxel,
-            "scale": scale}
+            "scale": scale, "point_weight": point_weight}
     c0, a0 = np.asarray(axis[0], dtype=np.float64), np.asarray(axis[1], dtype=np.float64)
     u, w = plane_frame(a0)[:2]
     tilt = np.tan(np.radians(LIT_TILT_DEG))
@@ -682,8 +692,8 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
     weights = np.ones(int(ok.sum()))
     for _ in range(LIT_ROUNDS):
         radii, _ = _lit_profile(c, a, heights, hits[ok], nrm[ok], pts, weights,
-                                       scale=scale, voxel=voxel,
-                                       smoothness=PROFILE_SMOOTHNESS, average=True)
+                                scale=scale, voxel=voxel, smoothness=PROFILE_SMOOTHNESS,
+                                point_weight=point_weight, average=True)
         # Tukey weights of each ray's radius miss, in voxels, the rays left out included (a
         # left-out row's residual is zero, so it is measured on the profile itself)
         hh, hr, _ = SurfaceOfRevolution(c, a, heights, radii).split(hits[ok])
@@ -702,7 +712,8 @@ def fit_revolution_lit(origins: np.ndarray, dirs: np.ndarray, normals: np.ndarra
     def refit(rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> SurfaceOfRevolution:
         return SurfaceOfRevolution(c, a, heights, _fit_profile(
             frame, ph[keep], prho[keep], o[kept], d[kept], scale=scale, voxel=voxel,
-            normals=nrm[kept], radii=np.maximum(radii, 0.0), radius_data=rows)[0])
+            normals=nrm[kept], radii=np.maximum(radii, 0.0), radius_data=rows,
+            point_weight=point_weight)[0])
 
     free = refit(None)
     free_misses = _misses(free, o, d, nrm, lo=lo, hi=hi, voxel=voxel)  # every ray's, once
@@ -756,11 +767,11 @@ def _lit_hits(c: np.ndarray, a: np.ndarray, o: np.ndarray, d: np.ndarray,
 
 def _lit_profile(c: np.ndarray, a: np.ndarray, heights: np.ndarray, hits: np.ndarray,
                  nrm: np.ndarray, pts: np.ndarray, weights: np.ndarray, *, scale: float,
-                 voxel: float, smoothness: float, average: bool = False
+                 voxel: float, smoothness: float, point_weight: float, average: bool = False
                  ) -> tuple[np.ndarray, np.ndarray]:
     """The profile through the points and the rays' hits with their slopes.
 
-    Returns the radii and the residuals: radii in voxels (points weighed by POINT_WEIGHT,
+    Returns the radii and the residuals: radii in voxels (points weighed by ``point_weight``,
     then the hits), then the slopes (in units of the normal). ``average``: the points'
     heights and radii averaged over half a voxel of height (:func:`_point_rows`); not in the
     axis' cost, whose rows are one per point.
@@ -770,9 +781,9 @@ def _lit_profile(c: np.ndarray, a: np.ndarray, heights: np.ndarray, hits: np.nda
     ph, pr, _ = frame.split(pts)
     sw = np.sqrt(weights)
     if average:
-        ph, pr, _ = _point_rows(ph, pr, POINT_WEIGHT / voxel, voxel)
+        ph, pr, _ = _point_rows(ph, pr, point_weight / voxel, voxel)
     values = (np.r_[ph, hh], np.r_[pr, hr],
-              np.r_[np.full(len(ph), POINT_WEIGHT / voxel), sw / voxel])
+              np.r_[np.full(len(ph), point_weight / voxel), sw / voxel])
     slopes = (hh, nrm @ a, np.einsum("ij,ij->i", nrm, e), sw)
     return _solve_profile(heights, scale=scale, smoothness=smoothness, values=values,
                           slopes=slopes)
@@ -780,13 +791,15 @@ def _lit_profile(c: np.ndarray, a: np.ndarray, heights: np.ndarray, hits: np.nda
 
 def _lit_residuals(c: np.ndarray, a: np.ndarray, o: np.ndarray, d: np.ndarray,
                    nrm: np.ndarray, pts: np.ndarray, *, lo: np.ndarray, hi: np.ndarray,
-                   voxel: float, scale: float, knot: float, smoothness: float) -> np.ndarray:
+                   voxel: float, scale: float, knot: float, smoothness: float,
+                   point_weight: float) -> np.ndarray:
     """The profile fit's residuals for the axis ``(c, a)``: points, rays' radii, slopes."""
     heights = _knots(c, a, lo, hi, knot * voxel)
     hits, ok = _lit_hits(c, a, o, d, nrm)
     out = np.full(len(pts) + 2 * len(o), LIT_NO_HIT)  # a ray without a hit costs
     _, res = _lit_profile(c, a, heights, hits[ok], nrm[ok], pts, np.ones(int(ok.sum())),
-                          scale=scale, voxel=voxel, smoothness=smoothness)
+                          scale=scale, voxel=voxel, smoothness=smoothness,
+                          point_weight=point_weight)
     index = np.flatnonzero(ok)
     out[: len(pts)] = res[: len(pts)]
     out[len(pts) + index] = res[len(pts): len(pts) + len(index)]
