@@ -336,6 +336,11 @@ def _half_met(residual: np.ndarray) -> np.ndarray:
     return (residual > QUADRIC_DEG) & (residual <= REJECT_DEG)
 
 
+def _median_miss(residual: np.ndarray, inside: np.ndarray) -> float:
+    """The median of ``residual`` over the rays ``inside``; infinite when there are none."""
+    return float(np.median(residual[inside])) if inside.any() else math.inf
+
+
 def level_ladder(resolution: int) -> list[int]:
     """Resolutions of the coarse-to-fine ladder: 16, 32, ... below ``resolution``, then it."""
     levels = []
@@ -1373,8 +1378,8 @@ class ImplicitStart:
         inside = [f[0].intersect(*rays, lo, hi)[2] for f in (fit, loose)]
         if not inside[1].any() or not self._quadric_suffices(inside[1], loose):
             return fit
-        before, after = (float(np.median(f[2][m])) if m.any() else np.inf
-                         for f, m in zip((fit, loose), inside, strict=True))
+        before, after = (_median_miss(f[2], m) for f, m in zip((fit, loose), inside,
+                                                               strict=True))
         return loose if before >= NOISY_POINT_DEG and after <= NOISY_POINT_GAIN * before \
             else fit
 
@@ -1649,31 +1654,32 @@ class ImplicitStart:
         motion bend the profile off the normals, or keep every fit from being the start. The
         shape ``accepted`` (else the best one that held the points, the grid fit's prior) is
         refitted from its own axis, to the rays it meets within REJECT_DEG, with the points
-        at :data:`~warpspec.revolution.NOISY_POINT_WEIGHT`, and the refit taken as
-        :meth:`_noisy_points_fit` takes the quadric's: it is the start by itself, the shape
-        before missed the normals by a median of NOISY_POINT_DEG or more, and the refit by at
-        most NOISY_POINT_GAIN times that. ``fit`` is :meth:`_revolution`'s.
+        at :data:`~warpspec.revolution.NOISY_POINT_WEIGHT`. The refit is taken when it is the
+        start by itself and, when ``accepted`` was given, misses the normals by a median of at
+        most NOISY_POINT_GAIN times its median (with no floor, unlike the quadric's refit:
+        NOISY_POINT_DEG says why). ``fit`` is :meth:`_revolution`'s, which is tried only
+        with points.
         """
         shape = accepted
         if shape is None and self._best is not None and \
                 isinstance(self._best[1], R.SurfaceOfRevolution):
             shape = self._best[1]
-        if shape is None or not self.scene.num_points:
+        if shape is None:
             return accepted
         origins, dirs, _, _ = self._rays
         hits, inside = shape.intersect(origins, dirs, self.grid.origin, self.grid.upper,
                                        step=self.grid.spacing)
         residual = self._residuals(shape, hits, inside)
         use = inside & (residual <= REJECT_DEG)
-        before = float(np.median(residual[inside])) if inside.any() else math.inf
         if int(use.sum()) < R.MIN_RAYS:
             return accepted
+        before = _median_miss(residual, inside)
         self._say("a surface of revolution fitted again with the points as noisy")
         loose, hits, inside = fit(use, self.scene.normals(hits), (shape.base, shape.axis),
                                   tilted=False, point_weight=R.NOISY_POINT_WEIGHT)
         if loose is None or not inside.any():
             return accepted
-        after = float(np.median(self._residuals(loose, hits, inside)[inside]))
+        after = _median_miss(self._residuals(loose, hits, inside), inside)
         if accepted is not None and after > NOISY_POINT_GAIN * before:
             return accepted
         return self._accept(loose, hits, inside) or accepted

@@ -564,11 +564,11 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
     By flash (no ``normals``: the rays are normal lines) the third-order energy is measured
     along the profile (:func:`_arc_length_weights`) and the points weigh
     :data:`PROFILE_POINT_WEIGHT`. Under lamps a ray's hit moves with the profile: there the
-    energy is measured along the axis and the points weigh ``point_weight`` (:data:`POINT_WEIGHT`
-    unless they are noisy), as in the
-    axis' cost (a coarse grid's profile drawn steeper met fewer normals, bottle-lamps at
-    resolution 32: 2 of 6 seeds lost; at weight 2 a quarter false on seed 3 came out 0.13 h
-    from the clean result, 0.09 at 20). Either way the flatness (:data:`FLATNESS`) holds the
+    energy is measured along the axis and the points weigh ``point_weight``
+    (:data:`POINT_WEIGHT` unless they are noisy), as in the axis' cost (a coarse grid's
+    profile drawn steeper met fewer normals, bottle-lamps at resolution 32: 2 of 6 seeds lost;
+    at weight 2 a quarter false on seed 3 came out 0.13 h from the clean result, 0.09 at
+    20). Either way the flatness (:data:`FLATNESS`) holds the
     profile between its radius data, its weights from the round before.
 
     Returns the radii and, with ``leave_out``, each line's out-of-sample miss in the last
