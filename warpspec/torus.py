@@ -42,12 +42,21 @@ RING = 1.2
 
 @dataclass(frozen=True)
 class Torus:
-    """A ring torus: centre, unit axis, core radius ``R`` and tube radius ``r`` (world units)."""
+    """A torus: centre, unit axis, core radius ``R`` and tube radius ``r`` (world units).
+
+    A ring (:attr:`is_ring`) is a candidate start; a fit that is none (a spindle) may still
+    be a first guess for the rounds of fitting and intersecting.
+    """
 
     centre: np.ndarray
     axis: np.ndarray
     R: float
     r: float
+
+    @property
+    def is_ring(self) -> bool:
+        """Whether the tube leaves a hole (``R >= RING r``): only a ring is a start."""
+        return self.R >= RING * self.r
 
     def _meridian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v = np.asarray(x, dtype=np.float64) - self.centre
@@ -109,7 +118,7 @@ def _unpack(params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
 
 
 def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
-              scale: float) -> Torus | None:
+              scale: float, ring: bool = True) -> Torus | None:
     """Fit a ring torus to normal lines and surface points.
 
     Args:
@@ -118,10 +127,13 @@ def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
         points: Surface points ``(P, 3)`` (at least one fixes the tube radius).
         scale: A length of the scene (the domain's size): the residuals' robust scale is
             1/1000 of it.
+        ring: Return only a ring torus (``R >= RING r``). With ``False`` any torus with
+            ``R > 0`` and ``r > 0`` is returned (a spindle too): a first guess whose hits
+            give the next round's normal lines, under a light whose normals move with them.
 
     Returns:
         The torus, or ``None`` when there are too few rays or points, or the best fit is no
-        ring (``R < RING r``).
+        ring (``R < RING r``) and ``ring`` is asked.
     """
     from scipy.optimize import least_squares
 
@@ -162,7 +174,7 @@ def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
 
     fit = least_squares(residuals, x0 / unit, loss="soft_l1", f_scale=1e-3, max_nfev=200)
     torus = Torus(*_unpack(fit.x * unit))
-    if not (torus.r > 0.0 and torus.R >= RING * torus.r):
+    if not (torus.r > 0.0 and torus.R > 0.0) or (ring and not torus.is_ring):
         return None
     return torus
 
@@ -194,9 +206,8 @@ def points_torus(points: np.ndarray) -> Torus | None:
     # the meridian section: the circle through the points' (rho, z), its centre (R, z0)
     R, z0, r = _circle_through(rho, z)
     c = c + z0 * a
-    if not (r > 0.0 and R >= RING * r):
-        return None
-    return Torus(c, a, R, r)
+    torus = Torus(c, a, R, r)
+    return torus if r > 0.0 and torus.is_ring else None
 
 
 def _circle_through(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
