@@ -332,11 +332,12 @@ def test_under_a_point_light_the_quadric_fit_settles(seed, monkeypatch):
     assert np.sum(undamped > 3.0) >= 2
 
 
-def test_a_quadric_in_the_wrong_basin_is_found_from_subsets():
+def test_grazing_true_highlights_missed_by_degrees_but_not_pixels_are_kept():
     """The flat ellipsoid under a lamp, seed 2, a tenth false: from every start the fit
-    misses two true normals by 6-9 degrees (from the truth it meets them all), so it is not
-    the start, nor a torus or a surface of revolution; a subset's fit is, and rejects exactly
-    the false highlights."""
+    misses two grazing true normals by 6.6 and 9.0 degrees (from the truth it meets them
+    all), which kept it from being the start: a subset's fit was. Their highlights need move
+    at most 1.4 px for the fit to meet them, so it is the start, and it keeps them: it rejects
+    exactly the false highlights (its robust weights had let the two go too)."""
     synthetic = _pebble_under_a_lamp(2, outliers=0.1)
     scene = synthetic.scene()
     grid = Grid.from_bounds(*scene.bounds(), resolution=64)
@@ -345,7 +346,9 @@ def test_a_quadric_in_the_wrong_basin_is_found_from_subsets():
     assert report.shape == "quadric"
     assert np.array_equal(report.weights == 0, synthetic.outlier_mask)
     true = ~synthetic.outlier_mask
-    assert report.residual_deg[true].max() < 3.0
+    assert np.sum(report.residual_deg[true] > 3.0) == 2
+    rays = report.residual_deg < 180.0
+    assert fit._pixel_miss(fit.quadric, rays)[true & rays].max() < 1.5
 
 
 def test_height_map_is_a_single_sheet_over_the_plane():
@@ -1218,6 +1221,10 @@ def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_nea
 
     stub = SimpleNamespace(grid=SimpleNamespace(origin=np.zeros(3), upper=np.full(3, 0.64)))
     stub._holds_points = lambda distance: ImplicitStart._holds_points(stub, distance)
+    stub._within_noise = lambda *args: ImplicitStart._within_noise(stub, *args)
+    pixels = np.full(20, np.inf)  # no move of a highlight meets its normal
+    stub._pixel_miss = lambda shape, rays: pixels
+    rays = np.ones(20, dtype=bool)
     residual = np.zeros(20)  # every normal met
     near = np.full(6, 0.014)  # within a voxel and a half: 0.015 = 1.5 * 0.64 / 64
     noisy, one_far, two_far, half_out = (near.copy() for _ in range(4))
@@ -1225,15 +1232,25 @@ def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_nea
     one_far[0] = 0.05  # one of six five voxels off
     two_far[:2] = 0.05
     half_out[:3] = 0.0175
-    assert ImplicitStart._shape_suffices(stub, residual, near)
-    assert ImplicitStart._shape_suffices(stub, residual, noisy)
-    assert ImplicitStart._shape_suffices(stub, residual, one_far)
-    assert not ImplicitStart._shape_suffices(stub, residual, two_far)
-    assert not ImplicitStart._shape_suffices(stub, residual, half_out)
-    assert not ImplicitStart._shape_suffices(stub, residual, np.full(6, 0.016))
-    assert ImplicitStart._shape_suffices(stub, residual, np.zeros(0))
-    # the normals still decide first
-    assert not ImplicitStart._shape_suffices(stub, np.full(20, 5.0), near)
+    def suffices(residual, distance):
+        return ImplicitStart._shape_suffices(stub, None, residual, rays, distance)
+
+    assert suffices(residual, near)
+    assert suffices(residual, noisy)
+    assert suffices(residual, one_far)
+    assert not suffices(residual, two_far)
+    assert not suffices(residual, half_out)
+    assert not suffices(residual, np.full(6, 0.016))
+    assert suffices(residual, np.zeros(0))
+    # the normals still decide first: missed by 5 degrees, unless by at most 3 pixels
+    assert not suffices(np.full(20, 5.0), near)
+    pixels[:] = 2.5
+    assert suffices(np.full(20, 5.0), near)
+    assert not suffices(np.full(20, 5.0), two_far)
+    pixels[:2] = 3.5  # 2 of 20 neither met nor clearly false: 10%, more than 5%
+    assert not suffices(np.full(20, 5.0), near)
+    pixels[1] = 2.0
+    assert suffices(np.full(20, 5.0), near)
 
 
 @pytest.mark.parametrize("name, options", [("point-light", {"seed": 0}),
@@ -1285,10 +1302,12 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior(m
     all 21 normals, with median misses of 0.58 and 0.40 degrees (noise either way): the
     revolution's is kept, 0.94 h from the truth at 64 cells (the quadric's, once taken by its
     smaller median, 1.34 h). (With the flatness that profile meets the normals and is the
-    start.)"""
-    from warpspec import revolution
+    start; so it is when the misses in pixels are allowed, which this test turns off: the two
+    are within 3 px of it, and it comes out 0.42 h off.)"""
+    from warpspec import implicit, revolution
 
     monkeypatch.setattr(revolution, "FLATNESS", 0.0)
+    monkeypatch.setattr(implicit, "PIXEL_MET", 0.0)
     fit = revolution.fit_revolution
 
     def refined_only(*args, refine=True, **kwargs):

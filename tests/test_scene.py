@@ -106,6 +106,25 @@ def test_scaled_projection_matrix_gives_same_rays():
     np.testing.assert_allclose(a.rays()[1], b.rays()[1], atol=1e-12)
 
 
+@pytest.mark.parametrize("light", [{"type": "camera"},
+                                   {"type": "point", "position": [0.5, -3.0, 2.0]},
+                                   {"type": "directional", "direction": [0.0, -1.0, 1.0]}])
+def test_shifted_rays_and_normals_are_those_of_the_moved_pixels(light):
+    data = {**base_dict(), "light": light}
+    shift = (0.75, -1.5)
+    moved = {**data, "specularities": [
+        {**sp, "pixel": [sp["pixel"][0] + shift[0], sp["pixel"][1] + shift[1]]}
+        for sp in data["specularities"]]}
+    a, b = Scene.from_dict(data), Scene.from_dict(moved)
+    hits = np.array([[0.1, 0.2, 0.3], [-0.4, 0.0, 0.2], [0.3, -0.2, -0.1]])
+    for x, y in zip(a.rays(shift=shift), b.rays(), strict=True):
+        np.testing.assert_allclose(x, y, atol=1e-14)
+    np.testing.assert_allclose(a.normals(hits, shift=shift), b.normals(hits), atol=1e-14)
+    assert np.abs(a.rays()[1] - b.rays()[1]).max() > 1e-4  # the shift moves the rays
+    np.testing.assert_array_equal(a.spec_pixel, np.asarray(
+        [sp["pixel"] for sp in data["specularities"]]))
+
+
 def test_each_ray_starts_at_its_own_camera():
     scene = Scene.from_dict(base_dict())
     origins, _ = scene.rays()

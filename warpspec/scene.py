@@ -270,6 +270,20 @@ def _box(value: Any, field: str) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def _pixel_directions(cameras: np.ndarray, camera: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Unit directions ``normalize(sign(det M) M^-1 (u, v, 1))`` of ``pixels`` in ``camera``.
+
+    Zero rows where a direction is not finite (the caller says which).
+    """
+    q = np.concatenate([pixels, np.ones((len(pixels), 1))], axis=1)
+    q /= np.max(np.abs(q), axis=1, keepdims=True) if len(q) else 1.0
+    M = cameras[:, :, :3]
+    with np.errstate(all="ignore"):
+        sign = np.linalg.slogdet(M)[0]  # robust to under/overflow of det
+        d = np.linalg.solve(M[camera], q[:, :, None])[:, :, 0] * sign[camera, None]
+    return _unit_rows(d)
+
+
 def _unit_rows(a: np.ndarray) -> np.ndarray:
     """Rows of ``a`` scaled to unit length without overflow; zero or non-finite rows become 0."""
     a = np.asarray(a, dtype=np.float64)
@@ -529,14 +543,7 @@ class Scene:
                     f'"light" or cameras[{c}].light',
                 )
 
-        # Rays: origin at the camera centre, direction sign(det M) M^-1 (u, v, 1).
-        q = np.concatenate([spec_pixel, np.ones((len(spec_pixel), 1))], axis=1)
-        q /= np.max(np.abs(q), axis=1, keepdims=True) if len(q) else 1.0
-        M = cams[:, :, :3]
-        with np.errstate(all="ignore"):
-            sign = np.linalg.slogdet(M)[0]  # robust to under/overflow of det
-            d = np.linalg.solve(M[spec_camera], q[:, :, None])[:, :, 0] * sign[spec_camera, None]
-        directions = _unit_rows(d)
+        directions = _pixel_directions(cams, spec_camera, spec_pixel)
         for i in np.flatnonzero(~np.any(directions != 0, axis=1)):
             raise _error(
                 f"specularities[{i}].pixel",
@@ -813,8 +820,13 @@ class Scene:
         """Return the camera centres ``c = -M^-1 p4``, shape ``(C, 3)``."""
         return self._centres.copy()
 
-    def rays(self) -> tuple[np.ndarray, np.ndarray]:
+    def rays(self, *, shift: tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
         """Return the specular rays.
+
+        Args:
+            shift: Pixels added to every specularity's ``(u, v)`` first: the rays of
+                highlights moved so (how far a highlight must move to meet a shape,
+                docs/DESIGN.md section 7).
 
         Returns:
             Origins, shape ``(M, 3)``: the centre of each specularity's camera; and unit
@@ -822,7 +834,14 @@ class Scene:
             from the camera into the scene.
 
         """
-        return self._centres[self.spec_camera], self._directions.copy()
+        return self._centres[self.spec_camera], self._shifted_directions(shift)
+
+    def _shifted_directions(self, shift: tuple[float, float]) -> np.ndarray:
+        """The rays' unit directions with ``shift`` added to every pixel (a copy)."""
+        if not any(shift):
+            return self._directions.copy()
+        return _pixel_directions(self.cameras, self.spec_camera,
+                                 self.spec_pixel + np.asarray(shift, dtype=np.float64))
 
     def ray_lights(self) -> tuple[np.ndarray, np.ndarray]:
         """Return the light of each specularity; a camera's own light overrides the scene's.
@@ -843,7 +862,8 @@ class Scene:
                 vectors[i] = light.vector
         return codes, vectors
 
-    def normals(self, points: np.ndarray | None = None) -> np.ndarray:
+    def normals(self, points: np.ndarray | None = None, *,
+                shift: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
         """Surface normals demanded by the reflection law, ``N = normalize(L - r)``.
 
         ``L`` is the unit vector toward the light: constant for a directional light,
@@ -853,6 +873,7 @@ class Scene:
         Args:
             points: Where each ray meets the surface, shape ``(M, 3)``; needed only when a
                 point light is in use.
+            shift: Pixels added to every specularity first, as in :meth:`rays`.
 
         Returns:
             Unit normals, shape ``(M, 3)``.
@@ -863,7 +884,7 @@ class Scene:
         """
         m = self.num_specularities
         codes, vectors = self.ray_lights()
-        r = self._directions
+        r = self._shifted_directions(shift)
         L = np.zeros((m, 3))
         directional = codes == LIGHT_DIRECTIONAL
         L[directional] = vectors[directional]
