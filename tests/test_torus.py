@@ -137,6 +137,23 @@ def test_points_scattered_by_half_a_voxel_still_let_the_torus_be_the_start():
     assert _ring_error(synthetic, solver.result()).mean() < 0.15
 
 
+def test_points_scattered_by_a_voxel_let_the_torus_under_a_point_lamp_be_the_start():
+    """Eight points moved by noise of a voxel per axis, half a pixel on the highlights: the
+    torus meets every normal, and its points lie at a median of 1.51 voxels from it. When a
+    voxel and a half was the most allowed, it was refused, and so was the grid fit made in
+    its place (17 of 47 rays met); it is the start, and after 20 iterations the surface lies
+    0.08 voxel from the truth in the mean (0.067 h end to end)."""
+    from .helpers import points_moved
+
+    synthetic = make_scene("torus-point", seed=0, noise=0.5)
+    solver = ws.Reconstructor(points_moved(synthetic.scene(), 1.0), resolution=64,
+                              device="cpu")
+    assert solver.fit_report.shape == "torus"
+    solver.run(20)
+    err = _ring_error(synthetic, solver.result())
+    assert err.mean() < 0.15
+
+
 @pytest.mark.parametrize(("seed", "outliers"),
                          [(0, 0.0), (3, 0.0), (5, 0.0), (1, 0.25), (5, 0.25)])
 def test_a_torus_under_a_point_lamp_is_the_start(seed, outliers):

@@ -73,16 +73,19 @@ move no more than this many pixels for the shape to meet it: noise of a pixel on
 highlights, which moves a grazing ray far along the surface),..."""
 PIXEL_STEP = 0.5
 """The move of a highlight (pixels) over which the change of a ray's miss is measured."""
-QUADRIC_POINT_SIZE = 1.5 / 64.0
+QUADRIC_POINT_SIZE = 2.0 / 64.0
 """...and it holds the points: their median distance from it is within this share of the
-domain's largest side (a voxel and a half at resolution 64, whatever the grid: the shape taken
+domain's largest side (two voxels at resolution 64, whatever the grid: the shape taken
 does not change with it),...
 Points from structure from motion carry noise, which the fit takes into its depth; the rule
 lets through noise of up to a voxel per axis. The median distance of such points from their
-own surface is 0.67 voxel, and of eight of them it passes 1.5 voxels about once in 300
-draws; a fitted shape leaves them further (the torus, a robust fit, passes through some
-points and leaves the others): one draw's eight lay at a median of 1.44 voxels from the
-torus that met every normal, and at 1.51 from the one under a point lamp (refused). On every
+own surface is 0.67 voxel, and of eight of them it passes 1.5 voxels about once in 280
+draws, 2 about once in 40,000; a fitted shape leaves them further (the torus, a robust fit,
+passes through some points and leaves the others): one draw's eight lay at a median of 1.44
+voxels from the torus that met every normal, and at 1.51 from the one under a point lamp.
+At a voxel and a half that torus was refused, and four more shapes that met the normals
+(points a voxel off per axis, 0.5 px on the highlights): the grid fits in their place were
+refused or came out 0.78-1.69 h off, the shapes 0.07-0.43 h. On every
 scene of the catalogue the shape that meets the normals holds its exact points within 0.07
 voxel, and every shape refused is refused by its normals; a shape of the wrong kind (a
 quadric on a bottle) misses most points by voxels. When 4 in 5 points had to lie within a
