@@ -125,6 +125,15 @@ def test_shifted_rays_and_normals_are_those_of_the_moved_pixels(light):
         [sp["pixel"] for sp in data["specularities"]]))
 
 
+@pytest.mark.parametrize("shift", [(np.nan, 0.0), (0.0, np.inf), (1.0,), "ab", None])
+def test_a_shift_that_is_not_two_finite_numbers_is_refused(shift):
+    scene = Scene.from_dict(base_dict())
+    with pytest.raises(SceneError, match="shift: expected two finite"):
+        scene.rays(shift=shift)
+    with pytest.raises(SceneError, match="shift: expected two finite"):
+        scene.normals(np.zeros((3, 3)), shift=shift)
+
+
 def test_each_ray_starts_at_its_own_camera():
     scene = Scene.from_dict(base_dict())
     origins, _ = scene.rays()

@@ -837,11 +837,24 @@ class Scene:
         return self._centres[self.spec_camera], self._shifted_directions(shift)
 
     def _shifted_directions(self, shift: tuple[float, float]) -> np.ndarray:
-        """The rays' unit directions with ``shift`` added to every pixel (a copy)."""
-        if not any(shift):
+        """The rays' unit directions with ``shift`` added to every pixel (a copy).
+
+        Raises:
+            SceneError: If ``shift`` is not two finite numbers.
+        """
+        try:
+            du, dv = (float(x) for x in shift)
+        except (TypeError, ValueError):
+            du = dv = math.nan
+        if not (math.isfinite(du) and math.isfinite(dv)):
+            raise _error("shift", f"expected two finite pixel offsets (du, dv), got {shift!r}")
+        if du == 0.0 and dv == 0.0:
             return self._directions.copy()
-        return _pixel_directions(self.cameras, self.spec_camera,
-                                 self.spec_pixel + np.asarray(shift, dtype=np.float64))
+        directions = _pixel_directions(self.cameras, self.spec_camera,
+                                       self.spec_pixel + np.array([du, dv]))
+        if not np.all(np.any(directions != 0, axis=1)):
+            raise _error("shift", f"{shift!r} moves a highlight to a pixel with no finite ray")
+        return directions
 
     def ray_lights(self) -> tuple[np.ndarray, np.ndarray]:
         """Return the light of each specularity; a camera's own light overrides the scene's.
