@@ -1234,7 +1234,7 @@ def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_nea
     half_out[:3] = 0.0215
 
     def suffices(residual, distance):
-        return ImplicitStart._shape_suffices(stub, None, residual, rays, distance)
+        return ImplicitStart._start_met(stub, None, residual, rays, distance) is not None
 
     assert suffices(residual, near)
     assert suffices(residual, noisy)

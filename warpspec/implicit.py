@@ -839,9 +839,9 @@ class ImplicitStart:
             self._quadric_field(self.grid, out)
             self.weights = enters.astype(float)
             shape = "guess"
-        elif self._quadric_suffices(enters):
+        elif (met := self._quadric_met(enters)) is not None:
             self._quadric_field(self.grid, out)
-            self._keep_met(enters)
+            self._keep_met(met)
             shape = "quadric"
         elif (torus := self._torus(ball)) is not None:
             self.torus = torus
@@ -852,9 +852,9 @@ class ImplicitStart:
             shape = "revolution"
             self._revolution_field(revolution, out)
         elif (found := self._consensus_quadric(self._wide_sphere(ball.centre))) is not None:
-            self.quadric, self.weights, self.residual = found
+            (self.quadric, self.weights, self.residual), met = found
             self._quadric_field(self.grid, out)
-            self._keep_met(self.residual < 180.0)
+            self._keep_met(met)
             shape = "quadric"
         else:
             # a torus or a surface of revolution that meets more normals than the quadric
@@ -1385,7 +1385,7 @@ class ImplicitStart:
         """``fit``, or its refit with the points weighed as noisy where that is the start.
 
         The refit (from ``fit``, the points at :data:`~warpspec.quadric.NOISY_POINT_WEIGHT`)
-        is taken when it is the start by itself (:meth:`_quadric_suffices`), ``fit``'s median
+        is taken when it is the start by itself (:meth:`_quadric_met`), ``fit``'s median
         normal miss is NOISY_POINT_DEG or more, and the refit's at most NOISY_POINT_GAIN times
         it. ``rays``: the scene's (origins, directions).
         """
@@ -1395,7 +1395,7 @@ class ImplicitStart:
         loose = Q.fit_quadric(self.scene, fit[0], lo=lo, hi=hi, voxel=self.grid.spacing,
                               point_weight=Q.NOISY_POINT_WEIGHT)
         inside = [f[0].intersect(*rays, lo, hi)[2] for f in (fit, loose)]
-        if not inside[1].any() or not self._quadric_suffices(inside[1], loose):
+        if not inside[1].any() or self._quadric_met(inside[1], loose) is None:
             return fit
         before, after = (_median_miss(f[2], m) for f, m in zip((fit, loose), inside,
                                                                strict=True))
@@ -1417,14 +1417,14 @@ class ImplicitStart:
         start), from ``start``; when one meets QUADRIC_SHARE of every ray's normal, the fit to
         the rays it meets within REJECT_DEG (robust from the first round), or that subset's fit
         when it meets more normals, is taken if it is the start by itself
-        (:meth:`_quadric_suffices`), else the search goes on. It looks for a quadric object
+        (:meth:`_quadric_met`), else the search goes on. It looks for a quadric object
         that false highlights or a poor start dragged off (a flat ellipsoid under a lamp, a
         tenth false: the fit from every start missed two grazing true normals by 6.6 and 9.0
         degrees, the one from the truth none; within 1.4 px of it, they no longer keep that
         fit from being the start, 0.021 h end to end against the subset's 0.015), not for a
         better prior of a shape that is none (a blob, seed
         2: a subset's quadric met 70% of the normals, and the grid fit about it was 0.013 h
-        worse). ``None`` when no subset gives one.
+        worse). Returns that fit and the rays it meets, or ``None`` when no subset gives one.
         """
         if self.m <= CONSENSUS_RAYS:
             return None
@@ -1443,46 +1443,36 @@ class ImplicitStart:
             # where the subset's quadric met them (pebble under a lamp, seed 1, a quarter
             # false: 18 of 26 normals met within QUADRIC_DEG against 20)
             weights = Q.robust_weights(residual, residual < 180.0, limit_deg=Q.FINAL_LIMIT_DEG)
-            fits = [f for f in (fit, (quad, weights, residual))
-                    if self._quadric_suffices(f[2] < 180.0, f)]
+            fits = [(f, met) for f in (fit, (quad, weights, residual))
+                    if (met := self._quadric_met(f[2] < 180.0, f)) is not None]
             if fits:
                 self._say("a quadric found from a subset of the highlights")
-                return max(fits, key=lambda f: _met(f[2]))
+                return max(fits, key=lambda f: _met(f[0][2]))
         return None
 
-    def _quadric_suffices(self, inside: np.ndarray, fit: tuple | None = None) -> bool:
-        """Whether the quadric is the shape (``inside``: the rays that enter the domain).
+    def _quadric_met(self, inside: np.ndarray, fit: tuple | None = None) -> np.ndarray | None:
+        """The rays the quadric meets if it is the start (:meth:`_start_met`), else ``None``.
 
-        It must meet most normals within noise, the rest must be clearly false (far off, not
-        a gradual falling away), and it must hold the points (:meth:`_shape_suffices`).
-        ``fit`` (a quadric, its weights and residuals) is judged instead of the one taken.
+        ``inside``: the rays that enter the domain. ``fit`` (a quadric, its weights and
+        residuals) is judged instead of the one taken.
         """
         quad, residual = (self.quadric, self.residual) if fit is None else (fit[0], fit[2])
-        return self._shape_suffices(quad, residual, inside,
-                                    quad.distance(self.scene.points.reshape(-1, 3)))
+        return self._start_met(quad, residual, inside,
+                               quad.distance(self.scene.points.reshape(-1, 3)))
 
-    def _keep_met(self, inside: np.ndarray) -> None:
+    def _keep_met(self, met: np.ndarray) -> None:
         """Set the quadric start's weights: 1 for a ray its fit kept or that it meets (else 0).
 
-        The rays it meets (:meth:`_met_rays`) include grazing true highlights that the fit's
-        robust weights let go, when the shape is the start by their pixel misses.
+        The rays it meets (``met``, :meth:`_start_met`) include grazing true highlights that
+        the fit's robust weights let go, when it is the start by their pixel misses.
         """
-        met = self._met_rays(self.quadric, self.residual, inside)
         self.weights = np.where((self.weights > 0.0) | met, 1.0, 0.0)
 
-    def _met_rays(self, shape, residual: np.ndarray, inside: np.ndarray) -> np.ndarray:
-        """The rays ``inside`` that a start meets.
+    def _start_met(self, shape, residual: np.ndarray, inside: np.ndarray,
+                   point_distance: np.ndarray) -> np.ndarray | None:
+        """The rays a closed-form shape meets if it is the start by itself, else ``None``.
 
-        Those within QUADRIC_DEG when they make it the start, else those within noise
-        (:meth:`_within_noise`).
-        """
-        met = inside & (residual <= QUADRIC_DEG)
-        return met if _suffices(met[inside], residual[inside]) else self._within_noise(
-            shape, residual, inside)
-
-    def _shape_suffices(self, shape, residual: np.ndarray, inside: np.ndarray,
-                        point_distance: np.ndarray) -> bool:
-        """Whether a closed-form shape (quadric, torus, surface of revolution) is the start.
+        The shape is a quadric, a torus or a surface of revolution.
 
         Args:
             shape: The shape.
@@ -1495,13 +1485,16 @@ class ImplicitStart:
         QUADRIC_AMBIGUOUS missed by at most REJECT_DEG: far off, not a gradual falling away).
         A normal is met within noise when it is missed by at most QUADRIC_DEG or, failing
         that for the shape, when its highlight need move at most PIXEL_MET pixels for the
-        shape to meet it (:meth:`_pixel_miss`).
+        shape to meet it (:meth:`_pixel_miss`); the rays met are those of the test it passed.
         """
         judged = residual[inside]
         if not len(judged) or not self._holds_points(point_distance):
-            return False
-        return _suffices(judged <= QUADRIC_DEG, judged) or _suffices(
-            self._within_noise(shape, residual, inside)[inside], judged)
+            return None
+        met = inside & (residual <= QUADRIC_DEG)
+        if _suffices(met[inside], judged):
+            return met
+        met = self._within_noise(shape, residual, inside)
+        return met if _suffices(met[inside], judged) else None
 
     def _within_noise(self, shape, residual: np.ndarray, inside: np.ndarray) -> np.ndarray:
         """The rays ``inside`` whose normals ``shape`` meets within noise.
@@ -1913,7 +1906,7 @@ class ImplicitStart:
         ``gradient``) or ``None``; a torus that is no ring
         (:attr:`warpspec.torus.Torus.is_ring`) only gives the next round's hits. The best
         round's shape is the start when it meets the normals and holds the points as a
-        quadric must (:meth:`_shape_suffices`); then the rays' residuals and weights are set
+        quadric must (:meth:`_start_met`); then the rays' residuals and weights are set
         (the rays it misses by more than REJECT_DEG are rejected).
         """
         if guess.kind != "sphere":
@@ -1983,7 +1976,7 @@ class ImplicitStart:
         return None
 
     def _accept(self, shape, hits: np.ndarray | None = None, inside: np.ndarray | None = None):
-        """``shape`` if it is the start by itself (:meth:`_shape_suffices`), else ``None``.
+        """``shape`` if it is the start by itself (:meth:`_start_met`), else ``None``.
 
         ``hits`` and ``inside``: the rays' crossings with it, when already traced. Sets the rays'
         residuals and weights (the rays it misses by more than REJECT_DEG are rejected).
@@ -2000,11 +1993,10 @@ class ImplicitStart:
         share = _met(residual)
         if self._holds_points(distance) and (self._best is None or share > self._best[0]):
             self._best = (share, shape)  # the grid fit's prior, should none be the start
-        if not self._shape_suffices(shape, residual, inside, distance):
+        if (met := self._start_met(shape, residual, inside, distance)) is None:
             return None
         self.residual = residual
-        self.weights = (inside & (residual <= REJECT_DEG)
-                        | self._met_rays(shape, residual, inside)).astype(float)
+        self.weights = (inside & (residual <= REJECT_DEG) | met).astype(float)
         return shape
 
     def _residuals(self, shape, hits: np.ndarray, inside: np.ndarray) -> np.ndarray:
