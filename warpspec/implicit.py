@@ -1610,6 +1610,28 @@ class ImplicitStart:
                 self._best = prior
         return self._noisy_points_torus(found)
 
+    def _noisy_refit_basis(self, accepted, kind: type, min_rays: int) -> tuple | None:
+        """Where a refit with the points weighed as noisy starts, or ``None``.
+
+        The shape is ``accepted``, else the best shape of ``kind`` that held the points (the
+        grid fit's prior). Returns it, the rays' hits on it, the rays that meet it in the
+        domain, their residuals (degrees) and the rays it meets within REJECT_DEG, the ones
+        refitted; ``None`` when there is no such shape or fewer than ``min_rays`` such rays.
+        """
+        shape = accepted
+        if shape is None and self._best is not None and isinstance(self._best[1], kind):
+            shape = self._best[1]
+        if shape is None:
+            return None
+        origins, dirs, _, _ = self._rays
+        hits, inside = shape.intersect(origins, dirs, self.grid.origin, self.grid.upper,
+                                       step=self.grid.spacing)
+        residual = self._residuals(shape, hits, inside)
+        use = inside & (residual <= REJECT_DEG)
+        if int(use.sum()) < min_rays:
+            return None
+        return shape, hits, inside, residual, use
+
     def _noisy_points_torus(self, accepted: T.Torus | None) -> T.Torus | None:
         """``accepted``, or a torus refitted with the points weighed as noisy.
 
@@ -1623,17 +1645,11 @@ class ImplicitStart:
         (its tube 0.058 too wide, 14% of the normals missed by 3-10 degrees); the refit's
         tube is 0.002 off, and it meets 98% of them.
         """
-        shape = accepted
-        if shape is None and self._best is not None and isinstance(self._best[1], T.Torus):
-            shape = self._best[1]
-        if shape is None or not self.scene.num_points:
+        if not self.scene.num_points or \
+                (basis := self._noisy_refit_basis(accepted, T.Torus, T.MIN_RAYS)) is None:
             return accepted
+        shape, hits, _, _, use = basis
         origins, dirs, _, _ = self._rays
-        lo, hi = self.grid.origin, self.grid.upper
-        hits, inside = shape.intersect(origins, dirs, lo, hi, step=self.grid.spacing)
-        use = inside & (self._residuals(shape, hits, inside) <= REJECT_DEG)
-        if int(use.sum()) < T.MIN_RAYS:
-            return accepted
         self._say("a ring torus fitted again with the points as noisy")
 
         def asked(at: np.ndarray) -> np.ndarray:
@@ -1642,10 +1658,7 @@ class ImplicitStart:
             placed[use] = at
             return self.scene.normals(placed)[use]
 
-        # each ray's pixel (radians): how far its direction turns as its highlight moves
-        pixel = 0.5 * sum(np.linalg.norm(self.scene.rays(shift=shift)[1] - dirs, axis=1)
-                          for shift in ((1.0, 0.0), (0.0, 1.0)))[use]
-        rays = (origins[use], dirs[use], asked, pixel)
+        rays = (origins[use], dirs[use], asked, self.scene.pixel_angles()[use])
         loose = T.refit_torus(shape, *rays, self.scene.points.reshape(-1, 3),
                               voxel=self.grid.spacing)
         if loose is None:
@@ -1840,19 +1853,10 @@ class ImplicitStart:
         NOISY_POINT_DEG says why). ``fit`` is :meth:`_revolution`'s, which is tried only
         with points.
         """
-        shape = accepted
-        if shape is None and self._best is not None and \
-                isinstance(self._best[1], R.SurfaceOfRevolution):
-            shape = self._best[1]
-        if shape is None:
+        if (basis := self._noisy_refit_basis(accepted, R.SurfaceOfRevolution,
+                                             R.MIN_RAYS)) is None:
             return accepted
-        origins, dirs, _, _ = self._rays
-        hits, inside = shape.intersect(origins, dirs, self.grid.origin, self.grid.upper,
-                                       step=self.grid.spacing)
-        residual = self._residuals(shape, hits, inside)
-        use = inside & (residual <= REJECT_DEG)
-        if int(use.sum()) < R.MIN_RAYS:
-            return accepted
+        shape, hits, inside, residual, use = basis
         before = _median_miss(residual, inside)
         self._say("a surface of revolution fitted again with the points as noisy")
         loose, hits, inside = fit(use, self.scene.normals(hits), (shape.base, shape.axis),

@@ -836,6 +836,19 @@ class Scene:
         """
         return self._centres[self.spec_camera], self._shifted_directions(shift)
 
+    def pixel_angles(self) -> np.ndarray:
+        """Return each ray's pixel as an angle.
+
+        How far its direction turns as its highlight moves one pixel, the mean over ``u`` and
+        ``v`` (radians, the chord of the turn).
+
+        Returns:
+            Angles, shape ``(M,)``: about ``1 / focal`` near the principal point.
+
+        """
+        return 0.5 * sum(np.linalg.norm(self._shifted_directions(shift) - self._directions,
+                                        axis=1) for shift in ((1.0, 0.0), (0.0, 1.0)))
+
     def _shifted_directions(self, shift: tuple[float, float]) -> np.ndarray:
         """The rays' unit directions with ``shift`` added to every pixel (a copy).
 

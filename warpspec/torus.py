@@ -54,6 +54,7 @@ ROBUST_PIXELS = 10.0
 less. At 1 px the fit is nearly one of least absolute values and stops short: 6 of the 56
 refits above 0.1-0.7 voxel off, at 3 px one (0.1), at 10 and 30 px none beyond 0.02."""
 
+
 @dataclass(frozen=True)
 class Torus:
     """A torus: centre, unit axis, core radius ``R`` and tube radius ``r`` (world units).
@@ -131,6 +132,18 @@ def _unpack(params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
     return c, a, float(params[5]), float(params[6])
 
 
+def _pack(torus: Torus) -> np.ndarray:
+    """The seven numbers :func:`_unpack` reads: centre, the axis' polar angles, ``R``, ``r``."""
+    a = torus.axis
+    return np.r_[torus.centre, np.arccos(np.clip(a[2], -1.0, 1.0)), np.arctan2(a[1], a[0]),
+                 torus.R, torus.r]
+
+
+def _units(scale: float) -> np.ndarray:
+    """The seven numbers' units in a fit: lengths in ``scale``, the same fit in any unit."""
+    return np.r_[np.full(3, scale), 1.0, 1.0, scale, scale]
+
+
 def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
               scale: float, ring: bool = True) -> Torus | None:
     """Fit a ring torus to normal lines and surface points.
@@ -176,10 +189,8 @@ def fit_torus(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     z = v @ a
     rho = np.linalg.norm(v - z[:, None] * a, axis=1)
     r = float(np.median(np.hypot(rho - R, z)))
-    x0 = np.r_[c, np.arccos(np.clip(a[2], -1.0, 1.0)), np.arctan2(a[1], a[0]), R, r]
-
-    # lengths in units of the scene's ``scale`` and residuals too: the same fit in any unit
-    unit = np.r_[np.full(3, scale), 1.0, 1.0, scale, scale]
+    x0 = _pack(Torus(c, a, R, r))
+    unit = _units(scale)  # and the residuals in ``scale`` too
 
     def residuals(x: np.ndarray) -> np.ndarray:
         params = x * unit
@@ -309,11 +320,8 @@ def refit_torus(start: Torus, origins: np.ndarray, dirs: np.ndarray,
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(o) < MIN_RAYS:
         return None
-    scale = max(start.R + start.r, voxel)
-    unit = np.r_[np.full(3, scale), 1.0, 1.0, scale, scale]
-    a = start.axis
-    x0 = np.r_[start.centre, np.arccos(np.clip(a[2], -1.0, 1.0)), np.arctan2(a[1], a[0]),
-               start.R, start.r]
+    unit = _units(max(start.R + start.r, voxel))
+    x0 = _pack(start)
 
     def residuals(x: np.ndarray) -> np.ndarray:
         torus = Torus(*_unpack(x * unit))
