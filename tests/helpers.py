@@ -65,3 +65,17 @@ def points_moved(scene, sigma_voxels: float, *, seed: int = 77):
     noise = sigma_voxels * h * np.random.default_rng(seed).standard_normal(pts.shape)
     data["points"] = (pts + noise).tolist()
     return ws.Scene.from_dict(data)
+
+
+def highlights_moved(scene, every: int, shift=(1.5, -1.0)):
+    """``scene`` with every ``every``-th highlight's pixel moved by ``shift`` (1.8 px by
+    default); the new scene and which highlights moved ``(M,)``."""
+    import warpspec as ws
+
+    data = scene.to_dict()
+    moved = np.zeros(len(data["specularities"]), dtype=bool)
+    moved[::every] = True
+    for i in np.flatnonzero(moved):
+        u, v = data["specularities"][i]["pixel"]
+        data["specularities"][i]["pixel"] = [u + shift[0], v + shift[1]]
+    return ws.Scene.from_dict(data), moved

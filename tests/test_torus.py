@@ -207,15 +207,12 @@ def test_rays_pass_the_points_with_their_normals_by_their_pixel_misses(name):
     px): the ray's move, not counting that the asked normal turns with it."""
     from warpspec.torus import pixel_misses
 
+    from .helpers import highlights_moved
+
     synthetic = make_scene(name, seed=0)
     truth = _truth(synthetic)
-    data = synthetic.scene().to_dict()
-    moved = np.zeros(len(data["specularities"]), dtype=bool)
-    moved[::4] = True
-    for i in np.flatnonzero(moved):
-        u, v = data["specularities"][i]["pixel"]
-        data["specularities"][i]["pixel"] = [u + 1.5, v - 1.0]
-    origins, dirs, _, asked, pixel, _ = _lit_rays(ws.Scene.from_dict(data), truth)
+    scene, moved = highlights_moved(synthetic.scene(), 4)
+    origins, dirs, _, asked, pixel, _ = _lit_rays(scene, truth)
     assert len(origins) == len(moved)  # every ray meets the torus
     misses = pixel_misses(truth, origins, dirs, asked, pixel)
     assert misses[~moved].max() < 1e-6

@@ -20,7 +20,7 @@ fitting and intersecting may start from the rays' hits on it.
 
 :func:`refit_torus` refits a torus with the points weighed as noisy: each ray should pass
 through the torus point whose normal is the one it asks (:func:`pixel_misses`, in pixels), and
-under a lamp the rays, not the points, fix the tube's radius.
+under a lamp the rays, not the points, fix the tube's radius (:mod:`warpspec.pixel_fit`).
 
 The implicit start takes the torus when the quadric does not meet the normals and the torus
 does, as it would take a quadric (the same shares of rays met within noise and missed by
@@ -36,6 +36,7 @@ import numpy as np
 
 from .geometry import best_fit_plane
 from .normal_lines import best_axis, first_crossing
+from .pixel_fit import NOISY_POINT_VOXELS, as_arrays, ray_misses, refine
 
 __all__ = ["Torus", "first_hits", "fit_torus", "pixel_misses", "points_torus", "refit_torus"]
 
@@ -43,18 +44,6 @@ MIN_RAYS = 12
 """Fewest normal lines a torus is fitted to."""
 RING = 1.2
 """The fitted torus must be a ring: ``R >= RING * r`` (else it is no candidate)."""
-NOISY_POINT_VOXELS = 1.0
-"""In :func:`refit_torus`, a point this many voxels off the torus weighs as much as a ray a
-pixel off (:func:`pixel_misses`): the two noises of structure from motion's points and of the
-highlights. Under lamps and a point lamp, seeds 0-3, eight points a voxel off per axis, 56
-refits from tori up to 1.7 voxels off: the tube within 0.02 voxel of the truth in every one;
-with the points weighed four times more, a median of 0.06 voxel off and at worst 0.15."""
-ROBUST_PIXELS = 10.0
-"""The robust loss' scale in :func:`refit_torus` (pixels): beyond it a ray weighs less and
-less. At 1 px the fit is nearly one of least absolute values and stops short: 6 of the 56
-refits above 0.1-0.7 voxel off, at 3 px one (0.1), at 10 and 30 px none beyond 0.02."""
-
-
 @dataclass(frozen=True)
 class Torus:
     """A torus: centre, unit axis, core radius ``R`` and tube radius ``r`` (world units).
@@ -277,12 +266,9 @@ def pixel_misses(torus: Torus, origins: np.ndarray, dirs: np.ndarray,
     Returns:
         The misses ``(M,)``.
     """
-    misses = []
-    for target in _normal_points(torus, asked(first_hits(torus, origins, dirs))):
-        v = target - origins
-        depth = np.maximum(np.einsum("ij,ij->i", v, dirs), 1e-12)
-        misses.append(np.linalg.norm(np.cross(v, dirs), axis=1) / (depth * pixel))
-    return np.minimum(*misses)
+    hits = first_hits(torus, origins, dirs)
+    return np.minimum(*(ray_misses(target, origins, dirs, pixel)
+                        for target in _normal_points(torus, asked(hits))))
 
 
 def refit_torus(start: Torus, origins: np.ndarray, dirs: np.ndarray,
@@ -296,8 +282,8 @@ def refit_torus(start: Torus, origins: np.ndarray, dirs: np.ndarray,
     (:func:`pixel_misses`). A point's residual is its distance from the
     torus in units of ``point_voxels`` voxels. Under a light other than the flash the rays fix
     the tube's radius; by flash a ray is a normal line of every torus about one core circle,
-    and only the points fix it. All seven numbers are refined together from ``start`` by
-    robust least squares (scipy's ``soft_l1`` loss, its scale :data:`ROBUST_PIXELS`).
+    and only the points fix it. All seven numbers are refined together from ``start``
+    (:func:`warpspec.pixel_fit.refine`).
 
     Args:
         start: The torus refined.
@@ -313,24 +299,17 @@ def refit_torus(start: Torus, origins: np.ndarray, dirs: np.ndarray,
     Returns:
         The torus, or ``None`` for fewer than :data:`MIN_RAYS` rays or a fit that is no ring.
     """
-    from scipy.optimize import least_squares
-
-    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-    d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    o, d, pts = as_arrays(origins, dirs, points)
     if len(o) < MIN_RAYS:
         return None
-    unit = _units(max(start.R + start.r, voxel))
-    x0 = _pack(start)
 
-    def residuals(x: np.ndarray) -> np.ndarray:
-        torus = Torus(*_unpack(x * unit))
+    def residuals(params: np.ndarray) -> np.ndarray:
+        torus = Torus(*_unpack(params))
         return np.r_[pixel_misses(torus, o, d, asked, pixel),
                      torus.value(pts) / (point_voxels * voxel)]
 
-    fit = least_squares(residuals, x0 / unit, loss="soft_l1", f_scale=ROBUST_PIXELS,
-                        max_nfev=200)
-    torus = Torus(*_unpack(fit.x * unit))
+    torus = Torus(*_unpack(refine(residuals, _pack(start),
+                                  _units(max(start.R + start.r, voxel)))))
     if not (torus.r > 0.0 and torus.is_ring):
         return None
     return torus
