@@ -27,7 +27,8 @@ def _truth(synthetic) -> Ellipsoid:
 def test_an_ellipsoid_is_the_quadric_it_gives_and_a_hyperboloid_is_none():
     """To a quadric in another frame and back: the same centre and matrix to 1e-12; the
     quadric vanishes on the ellipsoid's points with given normals, its gradient along them.
-    A hyperboloid, a cylinder and an empty quadric give no ellipsoid."""
+    A hyperboloid, a cylinder, an empty quadric and the outside of a sphere (an object about
+    a hollow) give no ellipsoid."""
     shape = _ellipsoid([0.1, -0.2, 0.05], [1.0, 0.6, 0.3], _rotation(0))
     quad = shape.quadric(centre=np.array([0.3, 0.0, -0.1]), scale=1.7)
     back = Ellipsoid.from_quadric(quad)
@@ -44,7 +45,8 @@ def test_an_ellipsoid_is_the_quadric_it_gives_and_a_hyperboloid_is_none():
     frame = {"frame_centre": np.zeros(3), "scale": 1.0}
     for coeffs in ([1, 1, -1, 0, 0, 0, 0, 0, 0, -1],   # a hyperboloid of one sheet
                    [1, 1, 0, 0, 0, 0, 0, 0, 0, -1],    # a cylinder
-                   [1, 1, 1, 0, 0, 0, 0, 0, 0, 1]):    # no real point
+                   [1, 1, 1, 0, 0, 0, 0, 0, 0, 1],     # no real point
+                   [-1, -1, -1, 0, 0, 0, 0, 0, 0, 1]):  # the outside of a sphere
         assert Ellipsoid.from_quadric(Q.Quadric(np.array(coeffs, float), **{
             "centre": frame["frame_centre"], "scale": frame["scale"]})) is None
 
@@ -52,7 +54,8 @@ def test_an_ellipsoid_is_the_quadric_it_gives_and_a_hyperboloid_is_none():
 def test_first_hits_are_the_rays_first_crossings_and_misses_come_nearest():
     """A ray through the ellipsoid meets it first where sampling along it finds q change sign
     (to 1e-9); one passing it by 1e-4 gets its nearest approach, 1e-4 off, beside the
-    tangent point; the signed distance of points 1e-3 off is 1e-3 to first order."""
+    tangent point; one from inside meets it ahead; the signed distance of points 1e-3 off is
+    1e-3 to first order."""
     shape = _ellipsoid([0.0, 0.0, 0.0], [1.0, 0.6, 0.3], _rotation(2))
     rng = np.random.default_rng(3)
     origins = 4.0 * rng.standard_normal((40, 3))
@@ -76,6 +79,9 @@ def test_first_hits_are_the_rays_first_crossings_and_misses_come_nearest():
     passing = shape.first_hits(start[None], R[:, 0][None])[0]
     assert abs(shape.distance(passing[None])[0] - 1e-4) < 1e-7
     assert np.linalg.norm(passing - tip) < 1e-6
+    # a ray from the centre meets it ahead, at the long axis' tip
+    ahead = shape.first_hits(shape.centre[None], R[:, 0][None])[0]
+    np.testing.assert_allclose(ahead, shape.centre + R[:, 0], atol=1e-12)
     normals = shape.normal_points(np.eye(3)) - shape.centre
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     at = shape.normal_points(np.eye(3))

@@ -49,13 +49,16 @@ class Ellipsoid:
 
     @classmethod
     def from_quadric(cls, quadric: Q.Quadric) -> Ellipsoid | None:
-        """The quadric as an ellipsoid, or ``None`` when it is none (nor a point or empty)."""
+        """The quadric as an ellipsoid whose inside is the object's, else ``None``.
+
+        ``None`` for a quadric that is no ellipsoid (nor a point or empty), and for one
+        negative inside an ellipsoid's outside (``A`` negative definite): an object outside
+        an ellipsoidal hollow, a concave face seen from within.
+        """
         A, b, c = quadric.matrix()
         eig = np.linalg.eigvalsh(A)
-        if not np.all(np.isfinite(eig)) or eig[0] * eig[-1] <= 0.0:
+        if not np.all(np.isfinite(eig)) or eig[0] <= 0.0:
             return None
-        if eig[0] < 0.0:
-            A, b, c = -A, -b, -c
         x0 = -0.5 * np.linalg.solve(A, b)
         k = float(x0 @ A @ x0 - c)
         if not k > 0.0:
@@ -77,7 +80,7 @@ class Ellipsoid:
         return Q.Quadric(coeffs / np.linalg.norm(coeffs), np.asarray(centre, float), scale)
 
     def first_hits(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """Where each ray first crosses the ellipsoid, or comes nearest to it ``(M, 3)``.
+        """Where each ray first crosses the ellipsoid ahead, or comes nearest to it ``(M, 3)``.
 
         A ray that misses gets its nearest approach to the centre in the metric ``M`` (where
         the two crossings meet as the ray leaves the ellipsoid): the hit moves on
@@ -88,7 +91,10 @@ class Ellipsoid:
         b = np.einsum("ij,jk,ik->i", dirs, self.matrix, w)
         c = np.einsum("ij,jk,ik->i", w, self.matrix, w) - 1.0
         disc = b * b - a * c
-        t = np.where(disc >= 0.0, (-b - np.sqrt(np.maximum(disc, 0.0))) / a, -b / a)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        # the crossing ahead: the far root from a ray that starts inside
+        near = (-b - root) / a
+        t = np.where(disc >= 0.0, np.where(near >= 0.0, near, (-b + root) / a), -b / a)
         return origins + t[:, None] * dirs
 
     def normal_points(self, normals: np.ndarray) -> np.ndarray:
