@@ -197,8 +197,7 @@ def refit_ellipsoid(start: Ellipsoid, origins: np.ndarray, dirs: np.ndarray,
         # from, before the rays ask the scene for normals where it would meet them
         shape = Ellipsoid._unpack(params)
         with np.errstate(all="ignore"):
-            radii = np.linalg.eigvalsh(shape.matrix) ** -0.5 \
-                if np.all(np.isfinite(shape.matrix)) else np.full(3, np.nan)
+            radii = shape.radii if np.all(np.isfinite(shape.matrix)) else np.full(3, np.nan)
             hits = shape.first_hits(o, d)
             if not (np.all(radii >= size / SPAN) and np.all(radii <= size * SPAN)
                     and np.all(np.isfinite(hits))):

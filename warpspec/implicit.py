@@ -381,6 +381,11 @@ def _suffices(met: np.ndarray, residual: np.ndarray) -> bool:
     return bool(np.mean(met) >= QUADRIC_SHARE and np.mean(ambiguous) <= QUADRIC_AMBIGUOUS)
 
 
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    """The rows of ``v`` ``(N, 3)`` at unit length (a zero row stays zero)."""
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
+
 def _median_miss(residual: np.ndarray, inside: np.ndarray) -> float:
     """The median of ``residual`` over the rays ``inside``; infinite when there are none."""
     return float(np.median(residual[inside])) if inside.any() else math.inf
@@ -549,7 +554,7 @@ def first_guess(scene, grid: Grid, plane: tuple[np.ndarray, np.ndarray]) -> Gues
     if c is None or not np.all((c > lo) & (c < hi)):
         c = scene.points.mean(axis=0) if scene.num_points else 0.5 * (lo + hi)
     u = centres[used] - c
-    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    u = _unit_rows(u)
     if not surrounds(u):
         return Guess("plane", np.asarray(plane[0], float), normal=np.asarray(plane[1], float),
                      convergence=c, lean=float(np.linalg.norm(u.mean(axis=0))))
@@ -1425,10 +1430,11 @@ class ImplicitStart:
             before, after = (_median_miss(f[2], m) for f, m in zip((fit, loose), inside,
                                                                    strict=True))
             if before >= NOISY_POINT_DEG and after <= NOISY_POINT_GAIN * before:
-                fit = loose
-        return self._noisy_points_ellipsoid(fit)
+                return self._noisy_points_ellipsoid(loose, inside[1])
+        return self._noisy_points_ellipsoid(fit, inside[0])
 
-    def _noisy_points_ellipsoid(self, fit: tuple[Q.Quadric, np.ndarray, np.ndarray]
+    def _noisy_points_ellipsoid(self, fit: tuple[Q.Quadric, np.ndarray, np.ndarray],
+                                inside: np.ndarray
                                 ) -> tuple[Q.Quadric, np.ndarray, np.ndarray]:
         """``fit``, or the ellipsoid refitted in pixels with the points weighed as noisy.
 
@@ -1440,14 +1446,14 @@ class ImplicitStart:
         normals, in pixels (the rays of the last refit). The pebble, points a voxel off per
         axis and half a pixel on the highlights, seeds 0, 4 and 5: no quadric was the start
         (75-82% of the normals within 3 degrees); the refit meets every normal, its radii and
-        centre within 0.02 voxel of the truth.
+        centre within 0.02 voxel of the truth. ``inside``: the rays that enter the domain
+        (``fit``'s quadric's).
         """
         held = E.Ellipsoid.from_quadric(fit[0])
         if held is None or not self.scene.num_points:
             return fit
         lo, hi = self.grid.origin, self.grid.upper
         origins, dirs = self.scene.rays()
-        inside = fit[0].intersect(origins, dirs, lo, hi)[2]
         was_start = self._quadric_met(inside, fit) is not None
         pixel = self.scene.pixel_angles()
         points = self.scene.points.reshape(-1, 3)
@@ -1455,21 +1461,14 @@ class ImplicitStart:
         self._say("an ellipsoid fitted again with the points as noisy")
         for _ in range(2):
             use = inside & (residual <= REJECT_DEG)
-
-            def asked(at: np.ndarray, use: np.ndarray = use) -> np.ndarray:
-                placed = np.zeros_like(origins)
-                placed[use] = at
-                return self.scene.normals(placed)[use]
-
-            rays = (origins[use], dirs[use], asked, pixel[use])
+            rays = (origins[use], dirs[use], self._asked(use), pixel[use])
             shape = E.refit_ellipsoid(shape, *rays, points, voxel=self.grid.spacing)
             if shape is None:
                 return fit
             quad = shape.quadric(centre=fit[0].centre, scale=fit[0].scale)
             anchors, _, inside = quad.intersect(origins, dirs, lo, hi)
-            g = quad.gradient(anchors)
-            residual = miss_deg(g / np.maximum(np.linalg.norm(g, axis=1), 1e-300)[:, None],
-                                self.scene.normals(anchors), inside)
+            residual = miss_deg(_unit_rows(quad.gradient(anchors)), self.scene.normals(anchors),
+                                inside)
         refit = (quad, Q.robust_weights(residual, inside, limit_deg=Q.FINAL_LIMIT_DEG), residual)
         if not inside.any() or self._quadric_met(inside, refit) is None:
             return fit
@@ -1602,8 +1601,7 @@ class ImplicitStart:
             hits, met = self._anchors(shape, *self.scene.rays(shift=shift))
             ok &= met
             hits = np.where(met[:, None], hits, 0.0)
-            g = shape.gradient(hits)
-            g = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+            g = _unit_rows(shape.gradient(hits))
             misses.append(g - self.scene.normals(hits, shift=shift))
         m = misses[0]
         jac = np.stack([misses[1] - misses[2], misses[3] - misses[4]], axis=2) / (2.0 * step)
@@ -1677,6 +1675,19 @@ class ImplicitStart:
                 self._best = prior
         return self._noisy_points_torus(found)
 
+    def _asked(self, use: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """The normals the rays ``use`` ask, as a function of their hits ``(U, 3)``.
+
+        Under a point lamp the normal a ray asks moves with its hit; a refit in pixels asks
+        again at every evaluation.
+        """
+        def asked(at: np.ndarray) -> np.ndarray:
+            placed = np.zeros((self.m, 3))
+            placed[use] = at
+            return self.scene.normals(placed)[use]
+
+        return asked
+
     def _noisy_refit_basis(self, accepted, kind: type, min_rays: int) -> tuple | None:
         """Where a refit with the points weighed as noisy starts, or ``None``.
 
@@ -1715,17 +1726,10 @@ class ImplicitStart:
         if not self.scene.num_points or \
                 (basis := self._noisy_refit_basis(accepted, T.Torus, T.MIN_RAYS)) is None:
             return accepted
-        shape, hits, _, _, use = basis
+        shape, _, _, _, use = basis
         origins, dirs, _, _ = self._rays
         self._say("a ring torus fitted again with the points as noisy")
-
-        def asked(at: np.ndarray) -> np.ndarray:
-            # the normals the rays ask at hits ``at``: under a point lamp they move with them
-            placed = hits.copy()
-            placed[use] = at
-            return self.scene.normals(placed)[use]
-
-        rays = (origins[use], dirs[use], asked, self.scene.pixel_angles()[use])
+        rays = (origins[use], dirs[use], self._asked(use), self.scene.pixel_angles()[use])
         loose = T.refit_torus(shape, *rays, self.scene.points.reshape(-1, 3),
                               voxel=self.grid.spacing)
         if loose is None:

@@ -44,6 +44,8 @@ MIN_RAYS = 12
 """Fewest normal lines a torus is fitted to."""
 RING = 1.2
 """The fitted torus must be a ring: ``R >= RING * r`` (else it is no candidate)."""
+
+
 @dataclass(frozen=True)
 class Torus:
     """A torus: centre, unit axis, core radius ``R`` and tube radius ``r`` (world units).
