@@ -10,6 +10,8 @@ from warpspec import quadric as Q
 from warpspec.geometry import crop_to_data_hull, crop_to_unwrapped_hull
 from warpspec.grid import Grid
 from warpspec.implicit import (
+    PIXEL_MET,
+    PIXEL_NOISE,
     ImplicitStart,
     box_frame,
     first_guess,
@@ -1221,9 +1223,9 @@ def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_nea
 
     stub = SimpleNamespace(grid=SimpleNamespace(origin=np.zeros(3), upper=np.full(3, 0.64)))
     stub._holds_points = lambda distance: ImplicitStart._holds_points(stub, distance)
-    stub._within_noise = lambda *args: ImplicitStart._within_noise(stub, *args)
     pixels = np.full(20, np.inf)  # no move of a highlight meets its normal
     stub._pixel_miss = lambda shape, rays: pixels
+    stub._allowance, stub._noisier = PIXEL_NOISE, False
     rays = np.ones(20, dtype=bool)
     residual = np.zeros(20)  # every normal met
     near = np.full(6, 0.019)  # within two voxels: 0.02 = 2 * 0.64 / 64
@@ -1243,15 +1245,19 @@ def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_nea
     assert not suffices(residual, half_out)
     assert not suffices(residual, np.full(6, 0.021))
     assert suffices(residual, np.zeros(0))
-    # the normals still decide first: missed by 5 degrees, unless by at most 3 pixels
+    # the normals still decide first: missed by 5 degrees, unless by at most PIXEL_NOISE pixels
     assert not suffices(np.full(20, 5.0), near)
-    pixels[:] = 2.5
+    pixels[:] = PIXEL_NOISE - 0.5
     assert suffices(np.full(20, 5.0), near)
     assert not suffices(np.full(20, 5.0), two_far)
-    pixels[:2] = 3.5  # 2 of 20 neither met nor clearly false: 10%, more than 5%
+    pixels[:2] = PIXEL_NOISE + 0.5  # 2 of 20 neither met nor clearly false: 10%, more than 5%
     assert not suffices(np.full(20, 5.0), near)
-    pixels[1] = 2.0
+    pixels[1] = PIXEL_NOISE
     assert suffices(np.full(20, 5.0), near)
+    # the rays kept for the flow are those within PIXEL_MET: beyond, they count for the shape
+    pixels[:] = np.linspace(0.0, PIXEL_NOISE, 20)
+    met = ImplicitStart._start_met(stub, None, np.full(20, 5.0), rays, near)
+    assert np.array_equal(met, pixels <= PIXEL_MET) and 0 < met.sum() < 20
 
 
 @pytest.mark.parametrize("name, options", [("point-light", {"seed": 0}),
@@ -1309,6 +1315,7 @@ def test_fits_that_meet_the_normals_within_noise_tie_and_keep_the_shaped_prior(m
 
     monkeypatch.setattr(revolution, "FLATNESS", 0.0)
     monkeypatch.setattr(implicit, "PIXEL_MET", 0.0)
+    monkeypatch.setattr(implicit, "PIXEL_NOISE", 0.0)
     fit = revolution.fit_revolution
 
     def refined_only(*args, refine=True, **kwargs):
