@@ -1788,15 +1788,16 @@ class ImplicitStart:
         origins, dirs, _, _ = self._rays
         rays = (origins[use], dirs[use], self._asked(use), self.scene.pixel_angles()[use])
         points = self.scene.points.reshape(-1, 3)
-        if not self._points_noisier(shape.value(points), float(np.median(rays[3])),
-                                    T.pixel_misses(shape, *rays), NOISY_TORUS_RATIO):
+        misses = T.pixel_misses(shape, *rays)  # ``shape`` is ``accepted`` when one was given
+        if not self._points_noisier(shape.value(points), float(np.median(rays[3])), misses,
+                                    NOISY_TORUS_RATIO):
             return accepted
         self._say("a ring torus fitted again with the points as noisy")
         loose = T.refit_torus(shape, *rays, points, voxel=self.grid.spacing)
         if loose is None:
             return accepted
         if accepted is not None and np.median(T.pixel_misses(loose, *rays)) > \
-                NOISY_TORUS_GAIN * np.median(T.pixel_misses(accepted, *rays)):
+                NOISY_TORUS_GAIN * np.median(misses):
             return accepted
         prior = self._best
         if (refit := self._accept(loose)) is not None:
