@@ -895,7 +895,19 @@ class ImplicitStart:
         if shape == "grid" and self._noisier:
             self._allowance = PIXEL_NOISE
             shape = self._closed_form(initial, ball, guess.kind == "plane", out)
-        if shape == "grid":
+        feature = None
+        if shape == "quadric":
+            # a quadric start that lets some highlights go may have cut off a feature no
+            # quadric has (a bump): the grid fit about it when a fit without them meets them
+            ladder = level_ladder(max(self.grid.shape) - 1)
+            feature = self._feature_fit(ladder, rounds, cg)
+            if feature is None:
+                ladder, rounds, cg = [], [], []
+            else:
+                shape = "grid"
+        if shape == "grid" and feature is not None:
+            pockets = self._take_fit(feature, out)
+        elif shape == "grid":
             # a torus or a surface of revolution that meets more normals than the quadric
             # (shares of every ray, 180 degrees off where a ray misses the shape) but not
             # enough to be the start may be a better prior for the grid fit; it is a closed
@@ -928,11 +940,7 @@ class ImplicitStart:
                 score = self._fit_score(level)
                 if best is not None and score <= best[0]:
                     continue
-                self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy()
-                                                                     != K.ANCHOR_NONE)
-                wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[level.f, level.world_h],
-                          outputs=[out], device=self.device)
-                pockets = fill_pockets(out, both=self._one_side)
+                pockets = self._take_fit(level, out)
                 best = (score, prior, self._one_side, self.weights.copy(), self.residual.copy(),
                         self.excluded.copy())
                 # free the fine level's arrays before the next fit allocates its own
@@ -989,7 +997,44 @@ class ImplicitStart:
             return "quadric"
         return "grid"
 
-    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
+    def _take_fit(self, level: _Level, out: wp.array) -> int:
+        """Write the grid fit ``level`` into ``out``, and its weights; the pockets sealed."""
+        self.weights = np.where(self.excluded, 0.0, 1.0) * (self.kind.numpy() != K.ANCHOR_NONE)
+        wp.launch(K.scaled_copy, dim=self.grid.shape, inputs=[level.f, level.world_h],
+                  outputs=[out], device=self.device)
+        return fill_pockets(out, both=self._one_side)
+
+    def _feature_fit(self, ladder: list[int], rounds: list[int], cg: list[int]
+                     ) -> _Level | None:
+        """The grid fit about the quadric start when it meets a feature the quadric lets go.
+
+        A quadric start may let go the highlights of a feature no quadric has (a bump seen by
+        a few rays) as it lets go false ones: each is missed by more than REJECT_DEG. The
+        ladder is fitted without them (it holds the quadric's shape), and those its fit
+        meets come back (:meth:`_bring_back`): a fit made without a ray that meets it
+        foresees it, which a false highlight's fit does not. The grid fit is the start when
+        at least two come back, each beside another (a feature is seen by more than one
+        highlight), and cross-validation rejects none of the rays then kept (the options of
+        :meth:`_grid_fit`'s ``without``). Otherwise ``None``, and the quadric start with its
+        weights and residuals stands.
+        """
+        _, _, enters = self.quadric.intersect(*self.scene.rays(), self.grid.origin,
+                                              self.grid.upper)
+        let_go = enters & (self.weights == 0.0)
+        if int(let_go.sum()) < 2:
+            return None
+        held = (self.weights.copy(), self.residual.copy())
+        self._say(f"the grid fit about the quadric, {int(let_go.sum())} highlights it lets go "
+                  "tried back")
+        level = self._grid_fit(ladder, rounds, cg, without=let_go)
+        if level is None:
+            self.weights, self.residual = held
+            self.excluded = np.zeros(self.m, dtype=bool)
+            self._rays_level = self._level_rays = None
+        return level
+
+    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int], *,
+                  without: np.ndarray | None = None) -> _Level | None:
         """The grid fit about the current prior, false highlights rejected; the last level.
 
         Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
@@ -1005,16 +1050,38 @@ class ImplicitStart:
         unforeseeable from the others, make it together). Only from a fit that meets the kept
         normals within noise (as for the trial): the lost bottle's blob under lamps, refitted
         without the rays it misses, looked supported.
+
+        Args:
+            ladder: The levels' resolutions.
+            rounds: Fit rounds per level (appended to).
+            cg: Conjugate-gradient iterations per fit (appended to).
+            without: The rays a quadric start let go (:meth:`_feature_fit`): no robust
+                passes, the ladder starts without them, and only those a fit without them
+                meets come back (no trial). The fit is given up (``None``) unless at least
+                two come back, each beside another (:meth:`_together`), and cross-validation
+                rejects none of the rays then kept.
         """
         self.excluded = np.zeros(self.m, dtype=bool)
         coarse = _robust_levels(ladder)
-        for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
-            self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
-                      f"(grids {', '.join(map(str, coarse))})")
-            self._ladder(coarse, [], [], smoothness=smoothness, third=0.0, quiet=True)
-            self.excluded |= self._outliers()
+        if without is None:
+            for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
+                self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
+                          f"(grids {', '.join(map(str, coarse))})")
+                self._ladder(coarse, [], [], smoothness=smoothness, third=0.0, quiet=True)
+                self.excluded |= self._outliers()
+        else:
+            self.excluded = without.copy()
         previous = self._ladder(ladder, rounds, cg)
         previous = self._bring_back(previous, ladder, rounds, cg, most=RETURN_ROUNDS)
+        if without is not None:
+            back = without & ~self.excluded
+            kept = ~self.excluded & (self.kind.numpy() != K.ANCHOR_NONE)
+            if int(back.sum()) < 2 or not np.array_equal(self._together(back, kept), back):
+                return None
+            if self._kept_median(previous) > TRIAL_DEG or self._cross_validate(
+                    previous, coarse[-1]):
+                return None
+            return previous
         previous = self._trial_return(previous, ladder, rounds, cg)
         if self._kept_median(previous) <= TRIAL_DEG and self._cross_validate(
                 previous, coarse[-1]):
@@ -1268,18 +1335,22 @@ class ImplicitStart:
         self._update_weights(level)
         return self.residual
 
-    def _together(self, rays: np.ndarray, among: np.ndarray) -> np.ndarray:
+    def _together(self, rays: np.ndarray, among: np.ndarray,
+                  anchors: np.ndarray | None = None) -> np.ndarray:
         """Those of ``rays`` (a mask) whose hits neighbour another's (a mask of all rays).
 
         Two hits neighbour each other when no hit of ``among`` lies inside the ball whose
         diameter joins them (the Gabriel graph of the hits): no ray between them sees the
-        surface there. Hits as the rays last met a fit (:meth:`_anchor`).
+        surface there. Hits: ``anchors`` ``(M, 3)``, else as the rays last met a fit
+        (:meth:`_anchor`).
         """
         index = np.flatnonzero(rays)
         out = np.zeros(self.m, dtype=bool)
         if len(index) < 2:
             return out
-        anchors = self.anchor.numpy().astype(np.float64)
+        if anchors is None:
+            anchors = self.anchor.numpy()
+        anchors = np.asarray(anchors, dtype=np.float64)
         others = anchors[among]
         for a, i in enumerate(index):
             for j in index[a + 1:]:
