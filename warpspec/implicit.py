@@ -1013,10 +1013,11 @@ class ImplicitStart:
         ladder is fitted without them (it holds the quadric's shape), and those its fit
         meets come back (:meth:`_bring_back`): a fit made without a ray that meets it
         foresees it, which a false highlight's fit does not. The grid fit is the start when
-        at least two come back, each beside another (a feature is seen by more than one
-        highlight), and cross-validation rejects none of the rays then kept (the options of
-        :meth:`_grid_fit`'s ``without``). Otherwise ``None``, and the quadric start with its
-        weights and residuals stands.
+        at least two come back (a feature is seen by more than one highlight) and
+        cross-validation rejects none of the rays then kept (the options of
+        :meth:`_grid_fit`'s ``without``): a false highlight that comes back is missed by the
+        fits made without it. Otherwise ``None``, and the quadric start with its weights and
+        residuals stands.
         """
         _, _, enters = self.quadric.intersect(*self.scene.rays(), self.grid.origin,
                                               self.grid.upper)
@@ -1058,8 +1059,8 @@ class ImplicitStart:
             without: The rays a quadric start let go (:meth:`_feature_fit`): no robust
                 passes, the ladder starts without them, and only those a fit without them
                 meets come back (no trial). The fit is given up (``None``) unless at least
-                two come back, each beside another (:meth:`_together`), and cross-validation
-                rejects none of the rays then kept.
+                two come back, the kept rays' median miss is within TRIAL_DEG, and
+                cross-validation rejects none of the rays then kept.
         """
         self.excluded = np.zeros(self.m, dtype=bool)
         coarse = _robust_levels(ladder)
@@ -1074,9 +1075,7 @@ class ImplicitStart:
         previous = self._ladder(ladder, rounds, cg)
         previous = self._bring_back(previous, ladder, rounds, cg, most=RETURN_ROUNDS)
         if without is not None:
-            back = without & ~self.excluded
-            kept = ~self.excluded & (self.kind.numpy() != K.ANCHOR_NONE)
-            if int(back.sum()) < 2 or not np.array_equal(self._together(back, kept), back):
+            if int((without & ~self.excluded).sum()) < 2:
                 return None
             if self._kept_median(previous) > TRIAL_DEG or self._cross_validate(
                     previous, coarse[-1]):
@@ -1335,22 +1334,18 @@ class ImplicitStart:
         self._update_weights(level)
         return self.residual
 
-    def _together(self, rays: np.ndarray, among: np.ndarray,
-                  anchors: np.ndarray | None = None) -> np.ndarray:
+    def _together(self, rays: np.ndarray, among: np.ndarray) -> np.ndarray:
         """Those of ``rays`` (a mask) whose hits neighbour another's (a mask of all rays).
 
         Two hits neighbour each other when no hit of ``among`` lies inside the ball whose
         diameter joins them (the Gabriel graph of the hits): no ray between them sees the
-        surface there. Hits: ``anchors`` ``(M, 3)``, else as the rays last met a fit
-        (:meth:`_anchor`).
+        surface there. Hits as the rays last met a fit (:meth:`_anchor`).
         """
         index = np.flatnonzero(rays)
         out = np.zeros(self.m, dtype=bool)
         if len(index) < 2:
             return out
-        if anchors is None:
-            anchors = self.anchor.numpy()
-        anchors = np.asarray(anchors, dtype=np.float64)
+        anchors = self.anchor.numpy().astype(np.float64)
         others = anchors[among]
         for a, i in enumerate(index):
             for j in index[a + 1:]:
