@@ -905,7 +905,7 @@ class ImplicitStart:
                 ladder, rounds, cg = [], [], []
             else:
                 shape = "grid"
-        if shape == "grid" and feature is not None:
+        if feature is not None:
             pockets = self._take_fit(feature, out)
         elif shape == "grid":
             # a torus or a surface of revolution that meets more normals than the quadric
@@ -1025,8 +1025,8 @@ class ImplicitStart:
         if int(let_go.sum()) < 2:
             return None
         held = (self.weights.copy(), self.residual.copy())
-        self._say(f"the grid fit about the quadric, {int(let_go.sum())} highlights it lets go "
-                  "tried back")
+        self._say(f"the grid fit about the quadric without the {int(let_go.sum())} highlights "
+                  "it lets go")
         level = self._grid_fit(ladder, rounds, cg, without=let_go)
         if level is None:
             self.weights, self.residual = held
