@@ -1012,12 +1012,12 @@ class ImplicitStart:
         a few rays) as it lets go false ones: each is missed by more than REJECT_DEG. The
         ladder is fitted without them (it holds the quadric's shape), and those its fit
         meets come back (:meth:`_bring_back`): a fit made without a ray that meets it
-        foresees it, which a false highlight's fit does not. The grid fit is the start when
-        at least two come back (a feature is seen by more than one highlight) and
-        cross-validation rejects none of the rays then kept (the options of
-        :meth:`_grid_fit`'s ``without``): a false highlight that comes back is missed by the
-        fits made without it. Otherwise ``None``, and the quadric start with its weights and
-        residuals stands.
+        foresees it, which a false highlight's fit does not; no robust passes and no trial
+        (a trial's fit bends to false normals). The fit is the start when at least two come
+        back (a feature is seen by more than one highlight), the kept rays' median miss is
+        within TRIAL_DEG, and cross-validation rejects none of the rays then kept: a false
+        highlight that comes back is missed by the fits made without it. Otherwise ``None``,
+        and the quadric start with its weights and residuals stands.
         """
         _, _, enters = self.quadric.intersect(*self.scene.rays(), self.grid.origin,
                                               self.grid.upper)
@@ -1027,15 +1027,18 @@ class ImplicitStart:
         held = (self.weights.copy(), self.residual.copy())
         self._say(f"the grid fit about the quadric without the {int(let_go.sum())} highlights "
                   "it lets go")
-        level = self._grid_fit(ladder, rounds, cg, without=let_go)
-        if level is None:
+        self.excluded = let_go.copy()
+        level = self._ladder(ladder, rounds, cg)
+        level = self._bring_back(level, ladder, rounds, cg, most=RETURN_ROUNDS)
+        if (int((let_go & ~self.excluded).sum()) < 2 or self._kept_median(level) > TRIAL_DEG
+                or self._cross_validate(level, _robust_levels(ladder)[-1])):
             self.weights, self.residual = held
             self.excluded = np.zeros(self.m, dtype=bool)
             self._rays_level = self._level_rays = None
+            return None
         return level
 
-    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int], *,
-                  without: np.ndarray | None = None) -> _Level | None:
+    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
         """The grid fit about the current prior, false highlights rejected; the last level.
 
         Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
@@ -1051,36 +1054,16 @@ class ImplicitStart:
         unforeseeable from the others, make it together). Only from a fit that meets the kept
         normals within noise (as for the trial): the lost bottle's blob under lamps, refitted
         without the rays it misses, looked supported.
-
-        Args:
-            ladder: The levels' resolutions.
-            rounds: Fit rounds per level (appended to).
-            cg: Conjugate-gradient iterations per fit (appended to).
-            without: The rays a quadric start let go (:meth:`_feature_fit`): no robust
-                passes, the ladder starts without them, and only those a fit without them
-                meets come back (no trial). The fit is given up (``None``) unless at least
-                two come back, the kept rays' median miss is within TRIAL_DEG, and
-                cross-validation rejects none of the rays then kept.
         """
         self.excluded = np.zeros(self.m, dtype=bool)
         coarse = _robust_levels(ladder)
-        if without is None:
-            for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
-                self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
-                          f"(grids {', '.join(map(str, coarse))})")
-                self._ladder(coarse, [], [], smoothness=smoothness, third=0.0, quiet=True)
-                self.excluded |= self._outliers()
-        else:
-            self.excluded = without.copy()
+        for index, smoothness in enumerate(ROBUST_SMOOTHNESS):
+            self._say(f"robust pass {index + 1} of {len(ROBUST_SMOOTHNESS)} "
+                      f"(grids {', '.join(map(str, coarse))})")
+            self._ladder(coarse, [], [], smoothness=smoothness, third=0.0, quiet=True)
+            self.excluded |= self._outliers()
         previous = self._ladder(ladder, rounds, cg)
         previous = self._bring_back(previous, ladder, rounds, cg, most=RETURN_ROUNDS)
-        if without is not None:
-            if int((without & ~self.excluded).sum()) < 2:
-                return None
-            if self._kept_median(previous) > TRIAL_DEG or self._cross_validate(
-                    previous, coarse[-1]):
-                return None
-            return previous
         previous = self._trial_return(previous, ladder, rounds, cg)
         if self._kept_median(previous) <= TRIAL_DEG and self._cross_validate(
                 previous, coarse[-1]):
