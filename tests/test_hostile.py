@@ -218,12 +218,13 @@ def test_a_million_point_scene_loads_and_validates_in_bounded_memory(tmp_path):
 
 
 def _rays_miss(data):
-    """Every ray misses: no points, and the domain moved off to where no camera looks."""
-    data["points"] = []
-    data["domain"] = {"min": [20.0, 20.0, 20.0], "max": [21.0, 21.0, 21.0]}
+    """Every ray misses: each highlight moved far off its image, where the camera looks past
+    the domain; the points stay inside it."""
+    for spec in data["specularities"]:
+        spec["pixel"] = [-1.0e4, -1.0e4]
 
 
-def test_every_ray_missing_without_points_exits_3_and_writes_nothing(capsys, tmp_path):
+def test_every_ray_missing_exits_3_and_writes_nothing(capsys, tmp_path):
     data = octant_data()
     _rays_miss(data)
     scene = tmp_path / "miss.json"
@@ -246,9 +247,45 @@ def test_the_verdict_is_on_the_result_through_the_api():
                             device="cpu")
     v = result.verdict
     assert not v.supported and v.hit_fraction == 0.0 and v.rays == 24
-    assert any("no constraint is on the surface" in r for r in v.reasons)
-    assert np.all(np.isinf(result.support))
     assert "NOT supported" in repr(result) and "array" not in repr(result)
+
+
+@pytest.mark.parametrize("points", [True, False], ids=["points-outside", "no-points"])
+def test_a_domain_that_holds_nothing_names_the_domain(capsys, tmp_path, points):
+    """No point inside the domain and no ray entering it: nothing to reconstruct there."""
+    data = octant_data()
+    if not points:
+        data["points"] = []
+    data["domain"] = {"min": [20.0, 20.0, 20.0], "max": [21.0, 21.0, 21.0]}
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(data))
+    status, err = run(capsys, "reconstruct", scene, "-o", tmp_path / "x.ply", *FAST)
+    assert_error(status, err, "domain: ")
+    assert f"none of the scene's {len(data['points'])} points" in err
+    assert "give a domain around the object" in err and not (tmp_path / "x.ply").exists()
+    with pytest.raises(ws.InputError, match="^grid: the box"):
+        ws.Reconstructor(ws.Scene.from_dict(data), device="cpu", grid=ws.Grid(
+            origin=np.full(3, 20.0), spacing=0.1, shape=(11, 11, 11)))
+
+
+def test_no_constraint_on_the_surface_is_named():
+    """Rays that enter the domain but meet no surface there, and no points."""
+    from warpspec.grid import Grid
+    from warpspec.verdict import assess
+
+    grid = Grid(origin=np.full(3, -1.0), spacing=0.1, shape=(21, 21, 21))
+    x, _, _ = grid.coordinates()
+    phi = x + 0.5  # a sheet at x = -0.5; the rays run along it, beside it
+    origins = np.array([[0.5, 0.0, 3.0], [0.2, 0.3, 3.0]])
+    dirs = np.tile([0.0, 0.0, -1.0], (2, 1))
+    hits = np.full((2, 3), np.nan)
+    vertices = np.array([[-0.5, 0.0, 0.0], [-0.5, 0.5, 0.0], [-0.5, 0.0, 0.5]])
+    v, support = assess(phi=phi, grid=grid, vertices=vertices, hits=hits,
+                        demanded_normals=None, points=np.zeros((0, 3)),
+                        camera_rays=(origins, dirs))
+    assert not v.supported and v.hit_fraction == 0.0
+    assert any("no constraint is on the surface" in r for r in v.reasons)
+    assert np.all(np.isinf(support))
 
 
 def test_resume_on_another_scenes_grid_is_refused(capsys, folder):
@@ -740,8 +777,10 @@ def test_the_truth_is_reached_from_outside_by_every_ray(name):
 def test_a_bottle_lost_under_lamps_is_not_reported_as_supported(monkeypatch):
     """Lamps, cameras on one ring above, a quarter of false highlights (seed 0): the first axis
     is 45 degrees off, and without the cameras' ring as a second first axis no surface of
-    revolution is found; the grid fit's fat open blob (6.0 voxels off) meets the normals it
-    keeps, but 5 of the 34 rays that meet it enter the domain inside it: not supported. No
+    revolution is found; the grid fit's fat open blob (4-6 voxels off) meets the normals it
+    keeps, but either a few of the rays that meet it enter the domain inside it (5 of 34), or
+    too few meet it (20 of 36, in the solver's frame about the grid's centre): not supported.
+    The check that catches it depends on the blob's last digits; both are tested alone above. No
     trial of its rejected rays is made (it misses the kept normals by 15 degrees, median):
     the trial's extra ladder bent it on until it looked supported. The quadric fits are ranked
     as before they were told apart by the rays that enter them from inside: since, the fit
@@ -749,7 +788,7 @@ def test_a_bottle_lost_under_lamps_is_not_reported_as_supported(monkeypatch):
     import warpspec.implicit as implicit
     from warpspec import quadric
     from warpspec.synthetic import make_scene
-    from warpspec.verdict import MAX_INSIDE_FRACTION
+    from warpspec.verdict import MAX_INSIDE_FRACTION, MIN_HIT_FRACTION
 
     monkeypatch.setattr(implicit, "camera_ring", lambda centres: None)
     monkeypatch.setattr(quadric.Quadric, "entered_from_inside",
@@ -759,5 +798,7 @@ def test_a_bottle_lost_under_lamps_is_not_reported_as_supported(monkeypatch):
     err = np.abs(synthetic.surface.implicit(result.vertices)).mean() / result.grid.spacing
     assert err > 2.0
     assert not result.verdict.supported
-    assert result.verdict.inside_fraction > MAX_INSIDE_FRACTION
-    assert any("enter the domain inside it" in r for r in result.verdict.reasons)
+    v = result.verdict
+    assert v.inside_fraction > MAX_INSIDE_FRACTION or v.hit_fraction < MIN_HIT_FRACTION
+    assert any("enter the domain inside it" in r or "specular rays meet the surface" in r
+               for r in v.reasons)

@@ -125,3 +125,20 @@ def test_nodes_nearly_on_the_surface_leave_no_speck_once_positions_are_merged(de
     assert len(mesh.split(only_watertight=False)) == 1
     assert np.abs(np.linalg.norm(verts - [0.03, -0.05, 0.02], axis=1) - radius).max() \
         < 0.05 * grid.spacing
+
+
+@pytest.mark.parametrize("offset", [0.0, 1.0e7])
+def test_ply_coordinates_are_double_only_where_float_would_round_them(tmp_path, offset):
+    import trimesh
+
+    from warpspec.mesh import write_ply
+
+    box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+    vertices = box.vertices + offset
+    write_ply(tmp_path / "m.ply", vertices, box.faces,
+              vertex_properties={"support": np.zeros(len(vertices))})
+    header = (tmp_path / "m.ply").read_bytes().split(b"end_header")[0].decode()
+    assert ("property double x" in header) == (offset > 0)
+    assert "property float support" in header
+    back = trimesh.load(tmp_path / "m.ply", process=False)
+    np.testing.assert_allclose(back.vertices, vertices, rtol=0, atol=1e-7 * 0.3)

@@ -738,3 +738,37 @@ def test_check_and_the_start_share_the_collinear_tolerance(offset, collinear):
     # A plane through the points has the normal +-y; the fallback takes the constraint normals.
     fitted = abs(abs(float(normal[1])) - 1.0) < 1e-9
     assert fitted == (not collinear)
+
+
+# ------------------------------------------------------------------------------ frames
+
+
+@pytest.mark.parametrize("kind", ["directional", "point", "camera", "per-camera"])
+def test_a_translated_scene_is_the_same_scene_measured_from_elsewhere(kind):
+    data = base_dict()
+    if kind == "per-camera":
+        data["cameras"][1]["light"] = {"type": "point", "position": [1.0, -2.0, 3.0]}
+    elif kind != "directional":
+        data["light"] = ({"type": "camera"} if kind == "camera"
+                         else {"type": "point", "position": [0.5, -4.0, 3.0]})
+    scene = Scene.from_dict(data)
+    origin = np.array([1.0e6, -2.5e5, 37.0])
+    far = scene.translated(-origin)  # every world position moved by +origin
+    o0, d0 = scene.rays()
+    o1, d1 = far.rays()
+    np.testing.assert_allclose(o1 - origin, o0, atol=1e-9)
+    np.testing.assert_allclose(d1, d0, atol=1e-12)
+    np.testing.assert_array_equal(far.spec_pixel, scene.spec_pixel)
+    np.testing.assert_allclose(far.points, scene.points + origin, rtol=0, atol=0)
+    np.testing.assert_allclose(far.domain[0], scene.domain[0] + origin)
+    hits = o0 + 3.0 * d0  # the normals the law demands move with the surface points
+    np.testing.assert_allclose(far.normals(hits + origin), scene.normals(hits), atol=1e-9)
+    back = far.translated(origin)
+    np.testing.assert_allclose(back.cameras, scene.cameras, rtol=1e-9, atol=1e-6)
+    assert back.light == scene.light or back.light.kind == "point"
+
+
+@pytest.mark.parametrize("origin", [[1.0, 2.0], [0.0, float("nan"), 0.0], "far"])
+def test_a_translation_that_is_not_a_point_is_refused(origin):
+    with pytest.raises(SceneError, match="origin"):
+        Scene.from_dict(base_dict()).translated(origin)

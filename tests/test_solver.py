@@ -337,3 +337,27 @@ def test_bad_arguments_are_input_errors_not_scene_errors(octant, kwargs, message
     with pytest.raises(ws.InputError, match=message) as info:
         ws.Reconstructor(octant, resolution=16, **kwargs)
     assert not isinstance(info.value, ws.SceneError)
+
+
+@pytest.mark.parametrize("offset", [[1.0e3, -5.0e2, 2.0e2], [5.0e5, 4.0e6, 1.0e2]],
+                         ids=["1e3", "4e6"])
+def test_a_scene_far_from_the_origin_gives_the_same_surface(offset, tmp_path):
+    # The torus fit of normal lines lost its digits 1000 units out (the surface came out
+    # 1.4 voxels off and open), and a grid 4 million units out was refused.
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from warpspec.synthetic import make_scene
+
+    scene = ws.Scene.from_dict(make_scene("torus", seed=0).scene_dict)
+    offset = np.asarray(offset)
+    near = ws.reconstruct(scene)
+    far = ws.reconstruct(scene.translated(-offset))
+    assert far.verdict.supported and near.verdict.supported
+    assert len(far.faces) == len(near.faces)
+    gap = cKDTree(near.vertices).query(far.vertices - offset)[0]
+    assert gap.max() < 1e-3 * near.grid.spacing
+    np.testing.assert_allclose(far.grid.origin - offset, near.grid.origin, atol=1e-9)
+    far.write_mesh(tmp_path / "far.ply")  # float32 would round 4e6 to half a unit
+    back = trimesh.load(tmp_path / "far.ply", process=False)
+    assert np.max(np.abs(back.vertices - far.vertices)) < 1e-6 * near.grid.spacing

@@ -17,9 +17,6 @@ MAX_RESOLUTION = 2048
 """Most cells along the longest side (2048^3 nodes would already need 250 GiB)."""
 FLOAT32_RANGE = (1e-30, 1e30)
 """Spacing and coordinates the float32 kernels carry without underflow or overflow."""
-MAX_COORDINATE_IN_CELLS = 1e5
-"""Largest distance of the grid from the world origin, in cells: float32 world positions
-resolve ``1e5 * 6e-8 = 0.006`` of a cell there; beyond it the kernels cannot place a node."""
 
 
 @dataclass(frozen=True)
@@ -59,11 +56,6 @@ class Grid:
                 f"domain: a voxel width of {self.spacing:.3g} with coordinates up to {far:.3g} "
                 f"is outside what the float32 kernels carry ({lo:g} to {hi:g}); express the "
                 "scene in other units (metres or millimetres)")
-        if far > MAX_COORDINATE_IN_CELLS * self.spacing:
-            raise InputError(
-                f"domain: the grid lies {far / self.spacing:.3g} voxels from the world origin "
-                f"(at most {MAX_COORDINATE_IN_CELLS:g}): float32 positions cannot resolve a "
-                "voxel there; move the scene's origin near the object")
 
     @classmethod
     def from_bounds(

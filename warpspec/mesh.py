@@ -200,6 +200,21 @@ def extract_mesh(phi: np.ndarray, grid: Grid) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
 
 
+PLY_FLOAT_TOLERANCE = 1e-6
+"""Largest float32 rounding of a vertex, as a fraction of the mesh's longest side, that a PLY
+file's ``float`` coordinates may carry (64 voxels wide: 6e-5 of a voxel)."""
+
+
+def _float32_holds(vertices: np.ndarray) -> bool:
+    """Whether float32 keeps every vertex within :data:`PLY_FLOAT_TOLERANCE` of the mesh's size."""
+    if not len(vertices):
+        return True
+    with np.errstate(over="ignore", invalid="ignore"):
+        moved = np.max(np.abs(vertices.astype(np.float32).astype(np.float64) - vertices))
+    size = float(np.max(np.ptp(vertices, axis=0)))
+    return bool(moved <= PLY_FLOAT_TOLERANCE * size)
+
+
 def write_ply(
     path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, *,
     vertex_properties: dict[str, np.ndarray] | None = None,
@@ -207,7 +222,9 @@ def write_ply(
     """Write a triangle mesh as binary little-endian PLY (float vertices, int indices).
 
     The layout is the one trimesh writes; the command line uses it for ``.ply`` so that a run
-    need not import trimesh at all.
+    need not import trimesh at all. Coordinates are ``double`` instead of ``float`` where
+    float32 would move a vertex by more than :data:`PLY_FLOAT_TOLERANCE` of the mesh's size
+    (a scene in a geographic frame, millions of units from its origin).
 
     Args:
         path: The file to write (overwritten; callers write through a temporary file).
@@ -218,7 +235,9 @@ def write_ply(
     """
     extra = dict(vertex_properties or {})
     vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    layout = [("xyz", "<f4", (3,))] + [(name, "<f4") for name in extra]
+    coordinate = "float" if _float32_holds(vertices) else "double"
+    layout = ([("xyz", "<f4" if coordinate == "float" else "<f8", (3,))]
+              + [(name, "<f4") for name in extra])
     table = np.empty(len(vertices), dtype=layout)
     table["xyz"] = vertices
     for name, values in extra.items():
@@ -235,7 +254,7 @@ def write_ply(
     header = (
         "ply\nformat binary_little_endian 1.0\n"
         f"element vertex {len(vertices)}\n"
-        "property float x\nproperty float y\nproperty float z\n"
+        + "".join(f"property {coordinate} {axis}\n" for axis in "xyz")
         + "".join(f"property float {name}\n" for name in extra)
         + f"element face {len(faces)}\n"
         "property list uchar int vertex_indices\nend_header\n"

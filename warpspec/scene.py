@@ -938,6 +938,30 @@ class Scene:
         n[degenerate] = -r[degenerate]
         return n
 
+    def translated(self, origin: Any) -> Scene:
+        """The same scene measured from ``origin``: a world point ``x`` is ``x - origin`` in it.
+
+        Cameras, points, point lights and the domain move; directions, pixels and rays'
+        angles do not. The solver works about its grid's centre (docs/DESIGN.md section 3):
+        a fit of normal lines or a quadric to coordinates far from the origin loses the
+        digits that tell the shape.
+
+        Raises:
+            SceneError: If ``origin`` is not three finite numbers.
+        """
+        o = _numbers(origin, "origin", 3, "a point [x, y, z]")
+        shift = np.eye(4)
+        shift[:3, 3] = o  # world = local + origin
+
+        def move(light: Light | None) -> Light | None:
+            point = light is not None and light.kind == "point"
+            return Light("point", light.vector - o) if point else light
+
+        domain = None if self.domain is None else (self.domain[0] - o, self.domain[1] - o)
+        return Scene(self.cameras @ shift, self.spec_camera, self.spec_pixel,
+                     self.points - o if len(self.points) else None, light=move(self.light),
+                     camera_lights=[move(li) for li in self.camera_lights], domain=domain)
+
     def bounds(self, *, margin: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
         """Return the box to reconstruct in.
 

@@ -6,6 +6,7 @@ back only when asked for. The driver never loops over voxels on the host.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -32,7 +33,7 @@ from ..options import DEFAULTS, OPTIONS, default_iterations
 from ..scene import Scene
 from ..verdict import SUPPORT_RADIUS
 from .starts import GivenStart, check_level_set, make_start
-from .state import Result, check_covers, load_state
+from .state import Result, check_covers, check_holds, load_state
 from .tracker import BandTracker
 from .workspace import Workspace
 
@@ -55,7 +56,10 @@ MEASURE_KEYS = (
 class Reconstructor:
     """Reconstruct a surface from a scene by level-set gradient descent (paper eq. 21).
 
-    Every option's default, unit and range is in :data:`warpspec.options.OPTIONS`.
+    Every option's default, unit and range is in :data:`warpspec.options.OPTIONS`. The solver
+    works about ``origin``, the grid's centre (docs/DESIGN.md section 3): ``workspace`` holds
+    positions measured from it, while ``scene``, ``grid`` and each :class:`Result` are in the
+    scene's own coordinates.
 
     Args:
         scene: The scene (cameras, specularities, light, points).
@@ -174,6 +178,9 @@ class Reconstructor:
                 DEFAULTS["resolution"] if resolution is None else resolution)
             lo, hi = scene.bounds(margin=opts["margin"])
             grid = Grid.from_bounds(lo, hi, resolution=resolution)
+            check_holds(scene, grid, "domain")
+        else:
+            check_holds(scene, grid, "grid")
         if phi0 is not None:
             strategy = GivenStart(check_level_set(phi0, grid, next(
                 k for k, v in given.items() if v is not None)))
@@ -182,8 +189,13 @@ class Reconstructor:
                                   fit_iterations=opts["fit_iterations"],
                                   fit_degree=opts["fit_degree"])
         self.grid = grid
+        # the solver works about the grid's centre; results are moved back (Scene.translated)
+        self.origin = grid.origin + 0.5 * grid.spacing * (np.asarray(grid.shape) - 1)
+        self._scene = scene.translated(self.origin)
+        self._grid = Grid(origin=grid.origin - self.origin, spacing=grid.spacing,
+                          shape=grid.shape)
         self.device = resolve_device(device)
-        self.workspace = Workspace(scene, grid, self.device,
+        self.workspace = Workspace(self._scene, self._grid, self.device,
                                    gaussian_width=opts["gaussian_width"],
                                    normal_radius=opts["normal_radius"],
                                    band=opts["narrow_band"] is not None and self.reinit_every > 0)
@@ -202,7 +214,7 @@ class Reconstructor:
         self._clock = 0.0
         self.graph = self.device.is_cuda if graph is None else bool(graph)
 
-        outcome = strategy.build(scene, self.workspace)
+        outcome = strategy.build(self._scene, self.workspace)
         self.start_surface = strategy
         self.fit_report = outcome.report
         self.bent_phi, self.initial_phi = outcome.bent, outcome.initial
@@ -317,7 +329,7 @@ class Reconstructor:
         s = self._tracker.sums()
         self._check_finite(s)
         active = int(s[MEASURE_SLOTS["active"]])
-        npts = max(self.scene.num_points, 1)
+        npts = max(self._scene.num_points, 1)
         e_n = float(s[MEASURE_SLOTS["energy_normal"]])
         # E_P = sum |phi(y)|, weighted as the flow weighs it: w_P times the Gaussian's volume.
         e_p = self.point_energy_weight * float(s[MEASURE_SLOTS["point_abs_sum"]])
@@ -327,7 +339,7 @@ class Reconstructor:
             "normal_error": float(s[MEASURE_SLOTS["normal_error_sum"]] / active) if active
             else float("nan"),
             "point_error": float(s[MEASURE_SLOTS["point_abs_sum"]] / npts / self.grid.spacing)
-            if self.scene.num_points else float("nan"),
+            if self._scene.num_points else float("nan"),
             "energy_normal": e_n,
             "energy_point": e_p,
             "energy_smooth": e_s,
@@ -390,8 +402,8 @@ class Reconstructor:
         kept = np.ones(len(hits), dtype=bool)
         if self.fit_report is not None:
             kept[self.fit_report.rejected] = False
-        origins, dirs = self.scene.rays()
-        normals = self.scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
+        origins, dirs = self._scene.rays()
+        normals = self._scene.normals(np.where(ok[:, None], hits, origins + dirs))[ok]
         return hits[ok], normals, kept[ok], origins[ok]
 
     def _wraps_around(self, normals: np.ndarray, hits: np.ndarray) -> bool:
@@ -418,7 +430,7 @@ class Reconstructor:
         if widest <= OPEN_ARC_DEG:
             return False
         # Cameras are where the user looked from; a false highlight does not move them.
-        seen_from = self.scene.rays()[0] - hits.mean(axis=0)
+        seen_from = self._scene.rays()[0] - hits.mean(axis=0)
         widest, next_widest = _widest_arcs(seen_from @ vt[0], seen_from @ vt[1])
         return bool(widest > OPEN_ARC_DEG and widest >= OPEN_ARC_RATIO * next_widest)
 
@@ -457,7 +469,7 @@ class Reconstructor:
         if len(hits) == 0:
             return vertices, faces
         behind = faces_behind(vertices, faces, anchors, front=normals.mean(axis=0),
-                              viewpoints=self.scene.camera_centres(), seen=(hits, seen_from),
+                              viewpoints=self._scene.camera_centres(), seen=(hits, seen_from),
                               radius=BEHIND_VOXELS * self.grid.spacing)
         if not behind.any() or behind.all():
             return vertices, faces
@@ -499,15 +511,15 @@ class Reconstructor:
         """
         phi = self.phi
         ws = self.workspace
-        hits = ws.scene_hits(self.scene.num_specularities)
+        hits = ws.scene_hits(self._scene.num_specularities)
         if ws.band is not None and self._tracker.width >= 2.0:
             # on the device, over the band's cells: no full grid through marching cubes
-            vertices, faces = triangulate_device(ws.phi, self.grid, band=ws.band,
+            vertices, faces = triangulate_device(ws.phi, self._grid, band=ws.band,
                                                  count=ws.band_count)
         else:
-            vertices, faces = triangulate(phi, self.grid)
+            vertices, faces = triangulate(phi, self._grid)
         anchors = np.vstack([hits[np.all(np.isfinite(hits), axis=1)],
-                             self.scene.points.reshape(-1, 3)])
+                             self._scene.points.reshape(-1, 3)])
         vertices, faces = self._pieces(vertices, faces, anchors)
         if crop and len(faces):
             hit_points, normals, kept, seen_from = self._hit_normals(hits)
@@ -518,11 +530,12 @@ class Reconstructor:
                 vertices, faces = self._crop_round(vertices, faces, anchors, hit_points[kept],
                                                    normals[kept])
         rejected = ([] if self.fit_report is None
-                    else rejected_summary(self.fit_report, self.scene))
-        result = Result(vertices=vertices, faces=faces, phi=phi, grid=self.grid,
-                        history=list(self.history), hits=hits, rejected=rejected)
-        result.assess(self.scene)
-        return result
+                    else rejected_summary(self.fit_report, self._scene))
+        local = Result(vertices=vertices, faces=faces, phi=phi, grid=self._grid,
+                       history=list(self.history), hits=hits, rejected=rejected)
+        local.assess(self._scene)
+        return dataclasses.replace(local, vertices=vertices + self.origin,
+                                   hits=hits + self.origin, grid=self.grid)
 
 
 def _widest_arcs(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:

@@ -246,6 +246,29 @@ def load_state(path: str | os.PathLike, *, max_nodes: int | None = None) -> tupl
     return phi, grid
 
 
+def check_holds(scene: Scene, grid: Grid, field: str) -> None:
+    """Refuse a grid that holds nothing to reconstruct: no point inside, no ray entering it.
+
+    Args:
+        scene: The scene.
+        grid: The grid (from the scene's domain, or given).
+        field: What names the grid in messages (``domain``, ``grid``).
+
+    Raises:
+        InputError: If none of the scene's points lies in the grid and none of its specular
+            rays enters it.
+    """
+    lo, hi = grid.origin, grid.upper
+    inside = bool(np.any(np.all((scene.points >= lo) & (scene.points <= hi), axis=1)))
+    enters = bool(scene.num_specularities) and bool(rays_meet_box(*scene.rays(), lo, hi).any())
+    if not (inside or enters):
+        raise InputError(
+            f"{field}: the box min={np.round(lo, 6).tolist()} max={np.round(hi, 6).tolist()} "
+            f"holds none of the scene's {scene.num_points} points and none of its "
+            f"{scene.num_specularities} specular rays enters it; give a domain around the "
+            "object (or none, to derive it from the points)")
+
+
 def check_covers(scene: Scene, grid: Grid, field: str) -> None:
     """Refuse a level set handed in whose grid does not hold the scene's constraints.
 
