@@ -472,3 +472,23 @@ def test_the_torus_is_refitted_only_when_its_points_are_noisier_than_its_rays(
     assert bool(calls) == refitted
     if not refitted:
         assert start.torus is None or abs(start.torus.r - _truth(synthetic).r) < 0.2 * grid.spacing
+
+
+def test_a_torus_turned_off_the_axes_is_the_same_closed_torus():
+    """Turned 70 degrees about an oblique axis (the domain, the box round the turned one, is
+    1.4 times as wide), the torus is found again: watertight, genus one, within a tenth of a
+    voxel of the truth on average (0.04 unturned)."""
+    from .helpers import turned
+
+    synthetic = make_scene("torus", seed=0)
+    k = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    turn = np.radians(70.0)
+    R = np.eye(3) + np.sin(turn) * cross + (1.0 - np.cos(turn)) * cross @ cross
+    result = ws.reconstruct(ws.Scene.from_dict(turned(synthetic.scene_dict, R)),
+                            resolution=64, device="cpu")
+    assert result.verdict.supported
+    assert result.mesh.is_watertight and result.mesh.euler_number == 0
+    back = result.vertices @ R  # each row turned back: R^T x
+    gap = np.linalg.norm(back - synthetic.surface.closest_point(back), axis=1)
+    assert gap.mean() < 0.1 * result.grid.spacing
