@@ -41,6 +41,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="pixel noise standard deviation in pixels (default: 0)")
     parser.add_argument("--outliers", type=float, default=0.0,
                         help="fraction of specularities replaced by random pixels (default: 0)")
+    parser.add_argument("--point-noise", type=float, default=0.0,
+                        help="noise on each coordinate of the 3D points, in voxels of the "
+                             "default grid (default: 0)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and outliers")
     parser.add_argument("--suffix", default="", help="appended to each file name")
     parser.add_argument("--no-meshes", action="store_true", help="do not write the .ply meshes")
@@ -48,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
 
     args.out_dir.mkdir(parents=True, exist_ok=True)
     for name in args.scenes:
-        scene = make_scene(name, noise=args.noise, outliers=args.outliers, seed=args.seed)
+        scene = make_scene(name, noise=args.noise, outliers=args.outliers, seed=args.seed,
+                           point_noise=args.point_noise)
         stem = args.out_dir / f"{name}{args.suffix}"
         scene.to_json(stem.with_suffix(".json"))
         truth = stem.parent / f"{stem.name}.truth.json"

@@ -69,6 +69,23 @@ def test_synth_noise_is_seeded(tmp_path, capsys):
     assert 0 < np.abs(pixels - clean.pixels).max()
 
 
+def test_synth_point_noise_moves_only_the_points(tmp_path, capsys):
+    a, b, t = (tmp_path / n for n in ("a.json", "b.json", "t.json"))
+    code, _, err = run(["synth", "torus", "-o", a, "--point-noise", 1, "--seed", 4,
+                        "--truth-json", t], capsys)
+    assert code == 0 and "points (noise 1 voxel)" in err
+    assert run(["synth", "torus", "-o", b, "--seed", 4], capsys)[0] == 0
+    noisy, plain = json.loads(a.read_text()), json.loads(b.read_text())
+    assert noisy["specularities"] == plain["specularities"]
+    moved = np.abs(np.subtract(noisy["points"], plain["points"])).max()
+    voxel = max(np.subtract(plain["domain"]["max"], plain["domain"]["min"])) / 64
+    assert 0.2 * voxel < moved < 6 * voxel
+    assert json.loads(t.read_text())["clean_points"] == plain["points"]
+    code, _, err = run(["synth", "torus", "-o", tmp_path / "c.json", "--point-noise", -1],
+                       capsys)
+    assert code != 0 and "--point-noise" in err and not (tmp_path / "c.json").exists()
+
+
 def test_evaluate_truth_against_itself_prints_zeros(octant_files, capsys, tmp_path):
     report = tmp_path / "eval.json"
     code, out, err = run(["evaluate", octant_files["mesh"], "--truth", octant_files["mesh"],

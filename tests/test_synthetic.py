@@ -28,6 +28,7 @@ from warpspec.synthetic import (
     Torus,
     clip_mesh,
     find_highlight,
+    jitter_points,
     look_at,
     make_scene,
     place_camera,
@@ -219,6 +220,47 @@ def test_noise_and_outliers():
     specs = [sp for sp, k in zip(bad.scene_dict["specularities"], keep, strict=True) if k]
     check_reflection_law({**bad.scene_dict, "specularities": specs},
                          bad.truth_points[keep], bad.truth_normals[keep])
+
+
+def test_point_noise_has_the_asked_spread_in_voxels_and_leaves_the_highlights():
+    clean = make_scene("torus")
+    voxel = float(np.max(clean.domain[1] - clean.domain[0])) / 64
+    devs = []
+    for seed in range(40):
+        noisy = make_scene("torus", seed=seed, point_noise=0.5)
+        plain = make_scene("torus", seed=seed)
+        # The pixels, outliers and geometry of the seed are those without point noise.
+        assert noisy.scene_dict["specularities"] == plain.scene_dict["specularities"]
+        np.testing.assert_array_equal(noisy.clean_points, plain.points)
+        assert plain.clean_points is None
+        devs.append((noisy.points - plain.points) / voxel)
+    devs = np.concatenate(devs).ravel()
+    # 40 seeds x the torus' points x 3 axes: the sample's spread within 12% of 0.5 voxel,
+    # its mean within 0.1 (a wrong unit, the domain's side or a millimetre, is far off).
+    assert len(devs) >= 300
+    assert abs(devs.std() / 0.5 - 1) < 0.12 and abs(devs.mean()) < 0.1
+    again = make_scene("torus", seed=3, point_noise=0.5)
+    np.testing.assert_array_equal(again.points, make_scene("torus", seed=3,
+                                                           point_noise=0.5).points)
+    assert again.truth_dict()["clean_points"] == make_scene("torus", seed=3).points.tolist()
+
+
+def test_point_noise_keeps_points_in_the_domain_and_the_input_untouched():
+    base = make_scene("octant")
+    before = json.dumps(base.scene_dict)
+    lo, hi = base.domain
+    wild = jitter_points(base, sigma=10 * float(np.max(hi - lo)), seed=1)
+    assert json.dumps(base.scene_dict) == before and base.clean_points is None
+    assert np.all(wild.points >= lo) and np.all(wild.points <= hi)
+    assert np.any(wild.points == lo) or np.any(wild.points == hi)
+    # Noise on noise: the clean points stay the first ones.
+    twice = jitter_points(wild, sigma=0.01, seed=2)
+    np.testing.assert_array_equal(twice.clean_points, base.points)
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(SceneError, match="point_noise"):
+            jitter_points(base, sigma=bad)
+        with pytest.raises(SceneError, match="point_noise"):
+            make_scene("octant", point_noise=bad)
 
 
 def test_invalid_settings_raise():

@@ -160,6 +160,9 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         raise InputError(f"--noise: must be a non-negative number of pixels, got {args.noise:g}")
     if not 0 <= args.outliers <= 1:
         raise InputError(f"--outliers: must be a fraction in [0, 1], got {args.outliers:g}")
+    if args.point_noise < 0:
+        raise InputError(f"--point-noise: must be a non-negative number of voxels, got "
+                         f"{args.point_noise:g}")
     if args.seed < 0:
         raise InputError(f"--seed: must be a non-negative integer, got {args.seed}")
     check_paths({"--output": out, "--truth": truth, "--truth-json": truth_json})
@@ -172,7 +175,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         options["highlights"] = args.highlights
     try:
         synthetic = make_scene(args.name, noise=args.noise, outliers=args.outliers,
-                               seed=args.seed, **options)
+                               seed=args.seed, point_noise=args.point_noise, **options)
     except InputError as exc:
         if str(exc).startswith("highlights:"):
             raise InputError(f"--{exc}") from None
@@ -202,7 +205,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"{args.name}: {len(synthetic.truth_points)} specularities "
               f"({int(synthetic.outlier_mask.sum())} outliers, noise {args.noise:g} px), "
-              f"{len(synthetic.cameras)} cameras, {len(synthetic.points)} points, "
+              f"{len(synthetic.cameras)} cameras, {len(synthetic.points)} points"
+              f"{f' (noise {args.point_noise:g} voxel)' if args.point_noise else ''}, "
               f"{_light_kind(synthetic.scene_dict)} -> {', '.join(written)}",
               file=sys.stderr)
     return 0
@@ -400,6 +404,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                             "uniformly over the image (the paper's scenes) or one on the object "
                             "whose normal is wrong by 15 degrees or more (the shape-class "
                             "scenes); the truth JSON lists them (default 0)")
+    synth.add_argument("--point-noise", type=finite, default=0.0, metavar="VOXELS",
+                       help="standard deviation of Gaussian noise added to each coordinate of "
+                            "the 3D points, in voxels of the default grid (the domain's longest "
+                            "side / 64), as structure from motion's points carry; the truth "
+                            "JSON keeps the clean ones (default 0)")
     synth.add_argument("--seed", type=integer, default=0, metavar="S",
                        help="seed of the noise and the outliers, and of the shape for the "
                             "scenes of every shape class (default 0)")

@@ -71,7 +71,13 @@ from .catalogue import (
     scene_names,
     wine_bottle,
 )
-from .scenes import SyntheticScene, corrupt_pixels, scene_from_path, scene_from_points
+from .scenes import (
+    SyntheticScene,
+    corrupt_pixels,
+    jitter_points,
+    scene_from_path,
+    scene_from_points,
+)
 from .surfaces import (
     Blob,
     Cylinder,
@@ -117,6 +123,7 @@ __all__ = [
     "car_window",
     "clip_mesh",
     "corrupt_pixels",
+    "jitter_points",
     "ellipsoid_cap",
     "find_highlight",
     "find_highlights",

@@ -21,8 +21,9 @@ from ..geometry import (
     _points,
     reflect,
 )
+from ..options import DEFAULTS
 from .cameras import Halfspace, Intrinsics, clip_mesh, spread_points
-from .scenes import SyntheticScene, scene_from_path, scene_from_points
+from .scenes import SyntheticScene, jitter_points, scene_from_path, scene_from_points
 from .surfaces import (
     Blob,
     Cylinder,
@@ -682,7 +683,7 @@ def scene_names() -> list[str]:
 
 
 def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
-               **options: Any) -> SyntheticScene:
+               point_noise: float = 0.0, **options: Any) -> SyntheticScene:
     """A built-in scene by name (see :data:`SCENES`).
 
     Args:
@@ -694,6 +695,9 @@ def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: in
             jitter, which points are chosen). The paper's scenes keep a fixed geometry.
         **options: Options only some scenes take (``freeform``: ``highlights``; ``wrap``:
             ``span``; ``bottle`` and ``bottle-lamps``: ``rings``, ``shoulder``).
+        point_noise: Standard deviation of Gaussian noise added to each coordinate of the
+            point constraints (:func:`~warpspec.synthetic.scenes.jitter_points`), in voxels
+            of the default grid: the domain's longest side over :data:`NOISE_RESOLUTION`.
 
     Raises:
         SceneError: If the name is unknown, a scene does not take an option, or the settings
@@ -706,4 +710,16 @@ def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: in
     for key in options:
         if key not in params:
             raise SceneError(f"{key}: scene {name!r} takes no such option")
-    return make(noise=noise, outliers=outliers, seed=seed, **options)
+    if not (np.isfinite(point_noise) and point_noise >= 0):
+        raise SceneError(f"point_noise: must be a non-negative number of voxels, got "
+                         f"{point_noise!r}")
+    synthetic = make(noise=noise, outliers=outliers, seed=seed, **options)
+    if point_noise == 0:
+        return synthetic
+    lo, hi = synthetic.domain
+    voxel = float(np.max(hi - lo)) / NOISE_RESOLUTION
+    return jitter_points(synthetic, sigma=point_noise * voxel, seed=seed)
+
+
+NOISE_RESOLUTION = DEFAULTS["resolution"]
+"""The resolution whose voxel is the unit of ``point_noise``: the reconstruction's default."""

@@ -6,7 +6,7 @@ import copy
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -95,6 +95,41 @@ def corrupt_pixels(
     return p, mask
 
 
+def jitter_points(synthetic: SyntheticScene, *, sigma: float, seed: int = 0) -> SyntheticScene:
+    """The scene with Gaussian noise added to each coordinate of its point constraints.
+
+    Structure from motion's points are never exact; this is its noise. The draw has its own
+    stream (``numpy.random.default_rng((seed, POINT_NOISE_STREAM))``), so the pixels' noise
+    and outliers of the same seed stay as they were. A point the noise carries out of the
+    domain is clamped onto the domain's face. Nothing of ``synthetic`` is modified.
+
+    Args:
+        synthetic: The scene.
+        sigma: Standard deviation of the noise per coordinate, in the scene's units (>= 0).
+        seed: Random seed.
+
+    Returns:
+        A new scene whose points moved; its ``clean_points`` keeps the points before.
+
+    Raises:
+        SceneError: If ``sigma`` is negative or not finite.
+    """
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise SceneError(f"point_noise: must be a non-negative length, got {sigma!r}")
+    clean = synthetic.points if synthetic.clean_points is None else synthetic.clean_points
+    rng = np.random.default_rng((int(seed), POINT_NOISE_STREAM))
+    lo, hi = synthetic.domain
+    moved = np.clip(synthetic.points + float(sigma) * rng.standard_normal(synthetic.points.shape),
+                    lo, hi)
+    scene_dict = copy.deepcopy(synthetic.scene_dict)
+    scene_dict["points"] = moved.tolist()
+    return replace(synthetic, scene_dict=scene_dict, clean_points=np.array(clean, copy=True))
+
+
+POINT_NOISE_STREAM = 0x5EED
+"""Second entry of the point noise's seed, which keeps its draw apart from the pixels'."""
+
+
 def _domain_dict(domain: Any) -> dict:
     if isinstance(domain, dict):
         lo, hi = domain.get("min"), domain.get("max")
@@ -135,6 +170,8 @@ class SyntheticScene:
         false_highlights: How outliers were drawn: ``"image"`` (a pixel anywhere in the
             image) or ``"surface"`` (a pixel whose ray meets the truth where the normal of
             the reflection law is wrong by 15 degrees or more).
+        clean_points: The point constraints before :func:`jitter_points` moved them
+            ``(S, 3)``; ``None`` when they carry no noise.
     """
 
     name: str
@@ -152,6 +189,7 @@ class SyntheticScene:
     closed: bool = False
     euler: int | None = None
     false_highlights: str = "image"
+    clean_points: np.ndarray | None = None
 
     @property
     def cameras(self) -> list[np.ndarray]:
@@ -202,6 +240,8 @@ class SyntheticScene:
             "truth_normals": self.truth_normals.tolist(),
             "light_directions": self.light_directions.tolist(),
             "points": self.points.tolist(),
+            "clean_points": (self.points if self.clean_points is None
+                             else self.clean_points).tolist(),
             "clean_pixels": self.clean_pixels.tolist(),
             "outliers": np.flatnonzero(self.outlier_mask).tolist(),
             "camera_centres": self.camera_centres.tolist(),
