@@ -21,7 +21,8 @@ way round, and each normal line the profile's slope where it meets the profile. 
    measured along the profile by flash (:func:`_arc_length_weights`), and a flatness that
    puts a shoulder's drop where no datum holds the profile flat (:data:`FLATNESS`);
    lines are met again and the profile refitted :data:`PROFILE_ROUNDS` times, each slope
-   weighed by Tukey's biweight of its angle.
+   weighed by Tukey's biweight of its angle; by flash, points that the profile fitted without
+   each one misses (:func:`_points_disagree`) weigh as noisy and the profile is refitted.
 
 The implicit start takes the surface when the quadric and the torus do not meet the normals and
 it does, as it would take a quadric.
@@ -84,6 +85,28 @@ at 0.5). Points off the surface by their own noise pull less too: six random poi
 (rms) off, seeds 0-5 but 3 (which falls to the grid fit either way), 0.20-0.52 h (0.20-1.26 at
 2, with the straight ends of before).
 The catalogue's exact points are still met within 0.02 voxel."""
+NOISY_PROFILE_SIZE = 0.3 / 64.0
+"""By flash the profile is refitted with the points weighed :data:`NOISY_PROFILE_POINT_WEIGHT`
+when the profile fitted without each point misses it by a median of more than this share of the
+domain's largest side (:func:`_points_disagree`; 0.3 voxel at resolution 64, whatever the grid,
+as :data:`warpspec.implicit.QUADRIC_POINT_SIZE`). By flash only the points fix the depth, and
+held at :data:`PROFILE_POINT_WEIGHT` the profile follows each one: points that carry noise of
+half a voxel per axis left bottles 0.20-0.94 voxel from the truth (the truth's mean distance
+from the fitted profile, seeds 0-5), at a voxel 0.47-1.90; a body whose one point lay 1.3 voxel
+in was drawn 1.2 voxel thin over the rays' band, and two points half a voxel apart in height
+and a voxel apart in radius bent the bottom 3 voxels out. Over seeds 0-11 the medians were
+0.01-0.05 voxel with exact points (clean or a quarter false), 0.02-0.23 with 1 px of noise on
+the highlights, 0.13-0.57 with points a quarter of a voxel off, 0.28-0.79 at half a voxel and
+0.40-1.87 at a voxel; the profiles taken 0.10-0.37, 0.11-0.49 and 0.16-0.98 voxel from the
+truth."""
+NOISY_PROFILE_POINTS = 3
+"""Fewest points whose disagreement is judged: fewer are held as they are."""
+NOISY_PROFILE_POINT_WEIGHT = 0.05
+"""The points' weight by flash when they disagree: a point a voxel off weighs as a slope 0.05 (3
+degrees) off, and the rays' slopes shape the profile while the points, all together, fix its
+depth. Bottle by flash, seeds 0-5, points half a voxel off per axis: 0.12-0.42 voxel from the
+truth (0.16-0.59 at 0.15, 0.24-0.52 at 0.03, where the flatness takes over where no ray is:
+0.17-0.20 with exact points at 0.05, 0.36-0.37 at 0.03), a voxel off: 0.17-0.87."""
 FLATNESS = 10.0
 """Weight of the profile's flatness, ``FLATNESS * FLAT_SLOPE^2 * log(1 + (r' / FLAT_SLOPE)^2)``
 integrated along the axis (lengths in units of the domain's size), against 1 for a unit error
@@ -321,15 +344,33 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     # out, the worst first, one at a time: a false highlight's line that passes near the axis
     # asks a slope at a height no other datum holds, and the profile follows it
     for left_out in range(LEAVE_OUT_PASSES + 1):
-        radii, misses = _fit_profile(profile, ph[keep], prho[keep], p[near], n[near],
-                                     scale=scale, voxel=voxel, leave_out=True)
+        radii, misses, point_misses = _fit_profile(profile, ph[keep], prho[keep], p[near],
+                                                   n[near], scale=scale, voxel=voxel,
+                                                   leave_out=True)
         worst = np.where(np.isfinite(misses), misses, -1.0)
         # (a line is left out only where a refit follows: the radii are made without it)
         if (worst.max() <= LEAVE_OUT_DEG or near.sum() <= MIN_RAYS
                 or left_out == LEAVE_OUT_PASSES):
             break
         near[np.flatnonzero(near)[int(np.argmax(worst))]] = False
+    if _points_disagree(point_misses, scale):
+        radii = _fit_profile(profile, ph[keep], prho[keep], p[near], n[near], scale=scale,
+                             voxel=voxel, radii=radii,
+                             point_weight=NOISY_PROFILE_POINT_WEIGHT)[0]
     return SurfaceOfRevolution(c, a, heights, radii), near
+
+
+def _points_disagree(misses: np.ndarray, scale: float) -> bool:
+    """Whether the points carry noise: the profile fitted without each misses it.
+
+    ``misses``: each point's out-of-sample distance from the profile (:func:`_fit_profile`).
+    The points disagree when there are at least :data:`NOISY_PROFILE_POINTS` finite misses
+    and their median exceeds :data:`NOISY_PROFILE_SIZE` of the domain's size ``scale``; a
+    point no other datum predicts (its leverage one) tells nothing.
+    """
+    misses = misses[np.isfinite(misses)]
+    return bool(len(misses) >= NOISY_PROFILE_POINTS
+                and np.median(misses) > NOISY_PROFILE_SIZE * scale)
 
 
 def _knots(c: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -346,7 +387,8 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
                    values: tuple[np.ndarray, np.ndarray, np.ndarray],
                    slopes: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                    bend: np.ndarray | None = None, flat: np.ndarray | None = None,
-                   leave_out: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                   leave_out: bool = False, point_misses: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares radii on the knots ``heights``, and the data rows' residuals.
 
     Args:
@@ -364,6 +406,8 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
             its normal (``(n_r, n_h)``, of unit length with its component across the
             meridian plane) and the normal of the profile fitted without that row, at its
             height: the row's out-of-sample miss.
+        point_misses: Return instead of the residuals each radius row's out-of-sample
+            residual: its radius less that of the profile fitted without it, at its height.
 
     Every row touches at most four neighbouring knots, so the normal equations are banded
     (seven diagonals) and solved by a banded Cholesky factorisation (by a banded LU one where
@@ -442,8 +486,17 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     if radii is None or not np.all(np.isfinite(radii)):
         # overflowing slopes or a singular system: no profile (NaN radii)
         radii = np.full(count, np.nan)
-        return radii, (np.full(n_s, np.nan) if leave_out else np.full(n_v + n_s, np.nan))
+        return radii, np.full(n_s if leave_out else n_v if point_misses else n_v + n_s, np.nan)
     fitted = lower * radii[first] + upper * radii[first + 1]
+    if point_misses:
+        # the residual of a row left out is its residual over 1 - its leverage (as below)
+        cols = np.arange(n_v)
+        rows_v = np.zeros((n_v, count))
+        rows_v[cols, i] = lower[:n_v]
+        rows_v[cols, i + 1] = upper[:n_v]
+        lever = np.einsum("ij,ji->i", rows_v, solve(rows_v.T.copy())) if n_v else np.zeros(0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return radii, (b[:n_v] - fitted[:n_v]) / (1.0 - lever) / vw
     if not leave_out:
         return radii, fitted - b
     # each slope row left out in turn, by the Sherman-Morrison update of the normal
@@ -552,7 +605,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
                  p: np.ndarray, n: np.ndarray, *, scale: float, voxel: float,
                  normals: np.ndarray | None = None, radii: np.ndarray | None = None,
                  radius_data: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                 leave_out: bool = False, point_weight: float = POINT_WEIGHT
+                 leave_out: bool = False, point_weight: float | None = None
                  ) -> tuple[np.ndarray, np.ndarray | None]:
     """The profile's radii: points' radii, the rays' normals where they meet it, smooth.
 
@@ -562,29 +615,32 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
     rows (heights, radii, weights), weighed as given (:data:`LIT_HIT_WEIGHT`).
 
     By flash (no ``normals``: the rays are normal lines) the third-order energy is measured
-    along the profile (:func:`_arc_length_weights`) and the points weigh
-    :data:`PROFILE_POINT_WEIGHT`. Under lamps a ray's hit moves with the profile: there the
-    energy is measured along the axis and the points weigh ``point_weight``
-    (:data:`POINT_WEIGHT` unless they are noisy), as in the axis' cost (a coarse grid's
-    profile drawn steeper met fewer normals, bottle-lamps at resolution 32: 2 of 6 seeds lost;
-    at weight 2 a quarter false on seed 3 came out 0.13 h from the clean result, 0.09 at
-    20). Either way the flatness (:data:`FLATNESS`) holds the
+    along the profile (:func:`_arc_length_weights`) and the points weigh ``point_weight``
+    (:data:`PROFILE_POINT_WEIGHT` unless they are noisy). Under lamps a ray's hit moves with
+    the profile: there the energy is measured along the axis and the points weigh
+    ``point_weight`` (:data:`POINT_WEIGHT` unless they are noisy), as in the axis' cost (a
+    coarse grid's profile drawn steeper met fewer normals, bottle-lamps at resolution 32: 2 of
+    6 seeds lost; at weight 2 a quarter false on seed 3 came out 0.13 h from the clean result,
+    0.09 at 20). Either way the flatness (:data:`FLATNESS`) holds the
     profile between its radius data, its weights from the round before.
 
     Returns the radii and, with ``leave_out``, each line's out-of-sample miss in the last
     round (degrees, NaN for a line not used; :func:`_solve_profile`, made without the
-    flatness), else ``None``.
+    flatness) and each point's out-of-sample distance from the profile (made with the
+    flatness, each point a row of its own, not averaged as :func:`_point_rows` says), else
+    ``None`` twice.
     """
     heights = profile.heights
-    misses = None
+    misses = point_misses = None
     if radii is None:
         radii = np.full(len(heights), float(np.median(prho)))
     outward = -n if normals is None else normals
     weights = np.ones(len(p))
     far = 2.0 * scale
     flash = normals is None
-    points = _point_rows(ph, prho, (PROFILE_POINT_WEIGHT if flash else point_weight) / voxel,
-                         voxel)
+    if point_weight is None:
+        point_weight = PROFILE_POINT_WEIGHT if flash else POINT_WEIGHT
+    points = _point_rows(ph, prho, point_weight / voxel, voxel)
     if radius_data is not None:
         points = tuple(np.r_[x, y] for x, y in zip(points, radius_data, strict=True))
     # the rays are traced to the profile as it is returned, held flat beyond its data
@@ -618,6 +674,12 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
             out = solve(leave_out=True)[1]
             misses = np.full(len(p), np.nan)
             misses[use] = out
+            # and each point's, its row its own (averaged with a point at nearly its height,
+            # the other row holds it where it is)
+            raw = (ph, prho, np.full(len(ph), point_weight / voxel))
+            slope = np.interp(ph, heights, np.gradient(radii, heights))
+            point_misses = (np.abs(solve(values=raw, flat=flat, point_misses=True)[1])
+                            / np.sqrt(1.0 + slope * slope))
         radii = np.maximum(radii, 0.0)
         seen = np.r_[ph, hh[use]]
         # Tukey weights of the slopes' angles on the new profile
@@ -627,7 +689,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
         # every line counts fully until the profile has taken its shape, then robustly
         tukey = biweight(angle, SLOPE_LIMIT_DEG)
         weights = np.where(met, tukey if round_ >= PROFILE_ROUNDS // 2 else 1.0, 0.0)
-    return _flat_ends(heights, radii, np.r_[ph, hh[met & (weights > 0.0)]]), misses
+    return _flat_ends(heights, radii, np.r_[ph, hh[met & (weights > 0.0)]]), misses, point_misses
 
 
 @_finite_or_none
