@@ -257,7 +257,7 @@ def test_point_noise_keeps_points_in_the_domain_and_the_input_untouched():
     twice = jitter_points(wild, sigma=0.01, seed=2)
     np.testing.assert_array_equal(twice.clean_points, base.points)
     for bad in (-0.1, float("nan")):
-        with pytest.raises(SceneError, match="point_noise"):
+        with pytest.raises(SceneError, match="sigma"):
             jitter_points(base, sigma=bad)
         with pytest.raises(SceneError, match="point_noise"):
             make_scene("octant", point_noise=bad)

@@ -606,7 +606,7 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
                  normals: np.ndarray | None = None, radii: np.ndarray | None = None,
                  radius_data: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                  leave_out: bool = False, point_weight: float | None = None
-                 ) -> tuple[np.ndarray, np.ndarray | None]:
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """The profile's radii: points' radii, the rays' normals where they meet it, smooth.
 
     Rays ``p + s n`` (``n`` inward) are traced to the current profile; the outward normal

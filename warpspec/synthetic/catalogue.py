@@ -682,6 +682,10 @@ def scene_names() -> list[str]:
     return list(SCENES)
 
 
+NOISE_RESOLUTION = DEFAULTS["resolution"]
+"""The resolution whose voxel is the unit of ``point_noise``: the reconstruction's default."""
+
+
 def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
                point_noise: float = 0.0, **options: Any) -> SyntheticScene:
     """A built-in scene by name (see :data:`SCENES`).
@@ -720,6 +724,3 @@ def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: in
     voxel = float(np.max(hi - lo)) / NOISE_RESOLUTION
     return jitter_points(synthetic, sigma=point_noise * voxel, seed=seed)
 
-
-NOISE_RESOLUTION = DEFAULTS["resolution"]
-"""The resolution whose voxel is the unit of ``point_noise``: the reconstruction's default."""

@@ -115,7 +115,7 @@ def jitter_points(synthetic: SyntheticScene, *, sigma: float, seed: int = 0) -> 
         SceneError: If ``sigma`` is negative or not finite.
     """
     if not (np.isfinite(sigma) and sigma >= 0):
-        raise SceneError(f"point_noise: must be a non-negative length, got {sigma!r}")
+        raise SceneError(f"sigma: must be a non-negative length, got {sigma!r}")
     clean = synthetic.points if synthetic.clean_points is None else synthetic.clean_points
     rng = np.random.default_rng((int(seed), POINT_NOISE_STREAM))
     lo, hi = synthetic.domain
