@@ -822,9 +822,10 @@ def test_the_lines_returned_are_those_the_profile_was_fitted_to(monkeypatch):
     assert np.abs(surface.value(v)).mean() / 0.02 > 0.8  # it follows that line
 
 
-def _truth_distance(synthetic, surface, voxel: float) -> float:
-    """Mean distance of the truth mesh's vertices from ``surface`` (voxels)."""
-    vertices = np.asarray(synthetic.truth_mesh().vertices)
+def _truth_distance(synthetic, surface, voxel: float, origin=0.0) -> float:
+    """Mean distance of the truth mesh's vertices from ``surface`` (voxels), the surface
+    measured from ``origin``."""
+    vertices = np.asarray(synthetic.truth_mesh().vertices) - origin
     return float(np.abs(surface.value(vertices)).mean()) / voxel
 
 
@@ -898,7 +899,6 @@ def test_the_points_judged_alike_about_any_origin():
         origins, dirs = scene.rays()
         surface = fit_revolution(origins, dirs, scene.points, lo=grid.origin - origin,
                                  hi=grid.upper - origin, voxel=grid.spacing)[0]
-        vertices = np.asarray(synthetic.truth_mesh().vertices) - origin
-        distances.append(float(np.abs(surface.value(vertices)).mean()) / grid.spacing)
+        distances.append(_truth_distance(synthetic, surface, grid.spacing, origin))
     assert abs(distances[0] - distances[1]) < 0.01
     assert max(distances) < 1.0

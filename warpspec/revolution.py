@@ -488,13 +488,22 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
         radii = np.full(count, np.nan)
         return radii, np.full(n_s if leave_out else n_v if point_misses else n_v + n_s, np.nan)
     fitted = lower * radii[first] + upper * radii[first + 1]
+
+    def leverage(part: slice) -> tuple[np.ndarray, np.ndarray]:
+        """``z_r = N^-1 a_r`` (a column each) and the leverage ``a_r . z_r`` of rows ``part``."""
+        cells = first[part]
+        rows = np.zeros((len(cells), count))
+        at = np.arange(len(cells))
+        rows[at, cells] = lower[part]
+        rows[at, cells + 1] = upper[part]
+        z = solve(rows.T.copy())  # (count, rows)
+        return z, np.einsum("ij,ji->i", rows, z)
+
     if point_misses:
         # the residual of a row left out is its residual over 1 - its leverage (as below)
-        cols = np.arange(n_v)
-        rows_v = np.zeros((n_v, count))
-        rows_v[cols, i] = lower[:n_v]
-        rows_v[cols, i + 1] = upper[:n_v]
-        lever = np.einsum("ij,ji->i", rows_v, solve(rows_v.T.copy())) if n_v else np.zeros(0)
+        if not n_v:
+            return radii, np.zeros(0)
+        lever = leverage(slice(0, n_v))[1]
         with np.errstate(divide="ignore", invalid="ignore"):
             return radii, (b[:n_v] - fitted[:n_v]) / (1.0 - lever) / vw
     if not leave_out:
@@ -504,11 +513,7 @@ def _solve_profile(heights: np.ndarray, *, scale: float, smoothness: float,
     if not n_s:
         return radii, np.zeros(0)
     cols = np.arange(n_s)
-    rows_s = np.zeros((n_s, count))
-    rows_s[cols, j] = lower[n_v:]
-    rows_s[cols, j + 1] = upper[n_v:]
-    z = solve(rows_s.T.copy())  # (count, n_s)
-    lever = np.einsum("ij,ji->i", rows_s, z)
+    z, lever = leverage(slice(n_v, None))
     resid = fitted[n_v:] - b[n_v:]
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = resid / (1.0 - lever)
