@@ -5,7 +5,8 @@ For each synthetic scene of the shape classes (seed 0) and the paper's octant, a
 them (the quadric; the ring torus and the surface of revolution, tried when the cameras stand
 all around; the robust passes on the coarse grids; the cross-validation passes on the
 coarsest; the ladder of grid fits, and the ladder
-again when rejected highlights come back), the rest of the set-up (redistance, the band, the
+again when rejected highlights come back or the points are weighed as noisy; the points left
+out one at a time), the rest of the set-up (redistance, the band, the
 device arrays), the flow's iterations (as many as the grid's schedule gives) and the meshing.
 Seconds, medians of ``--repeats`` runs in one process, after one untimed run that loads the
 kernels.
@@ -27,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 SCENES = ("octant", "sphere-around", "ellipsoid-around", "pebble", "torus", "torus-lamps",
           "torus-point", "blob", "bottle", "bottle-lamps", "wrap", "freeform", "point-light")
 STAGES = ("quadric", "torus", "revolution", "robust passes", "cross-validation", "grid fit",
-          "grid fit again", "other set-up", "iterations", "meshing", "total")
+          "grid fit again", "points judged", "other set-up", "iterations", "meshing", "total")
 
 
 def _stage(text: str) -> str:
@@ -36,6 +37,7 @@ def _stage(text: str) -> str:
                          ("robust pass", "robust passes"),
                          ("cross-validation pass", "cross-validation"), ("grid ", "grid fit"),
                          ("the ladder again", "grid fit again"),
+                         ("the points left out", "points judged"),
                          ("the start redistanced", "other set-up")):
         if text.startswith(prefix):
             return name
