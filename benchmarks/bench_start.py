@@ -32,7 +32,8 @@ STAGES = ("quadric", "torus", "revolution", "robust passes", "cross-validation",
 
 
 def _stage(text: str) -> str:
-    for prefix, name in (("a quadric", "quadric"), ("a ring torus", "torus"),
+    for prefix, name in (("a quadric", "quadric"), ("an ellipsoid", "quadric"),
+                         ("a ring torus", "torus"),
                          ("a surface of revolution", "revolution"),
                          ("robust pass", "robust passes"),
                          ("cross-validation pass", "cross-validation"), ("grid ", "grid fit"),
