@@ -1115,21 +1115,23 @@ class ImplicitStart:
         points left out (the median distance) by :data:`NOISY_GRID_RATIO`, the ladder is
         refitted at that weight, and taken when it meets the kept normals closer by
         :data:`NOISY_GRID_GAIN` (the median miss).
+
+        The rays are left anchored on the fit of the last level made; the caller anchors
+        them on the fit returned (:meth:`_fit_score`).
         """
         if self.scene.num_points < NOISY_GRID_POINTS:
             return previous
-        missed = self._kept_median(previous)
         self._say(f"the points left out one at a time ({2 * self.scene.num_points} fits)")
         held = np.median(np.abs(self._point_misses(POINT_WEIGHT, ladder)))
         loose = np.median(np.abs(self._point_misses(NOISY_GRID_POINT_WEIGHT, ladder)))
         if loose < NOISY_GRID_RATIO * held:
+            missed = self._kept_median(previous)
             self._say("the ladder again, the points weighed as noisy")
             self.point_weights[:] = NOISY_GRID_POINT_WEIGHT
             refit = self._ladder(ladder, rounds, cg, quiet=True, start=previous)
             if self._kept_median(refit) < NOISY_GRID_GAIN * missed:
                 return refit
-        self.point_weights[:] = POINT_WEIGHT
-        self._kept_median(previous)  # the rays anchored on it again
+            self.point_weights[:] = POINT_WEIGHT
         return previous
 
     def _point_misses(self, weight: float, ladder: list[int]) -> np.ndarray:
@@ -1139,10 +1141,11 @@ class ImplicitStart:
         """
         points = self.scene.points.reshape(-1, 3)
         misses = np.zeros(len(points))
+        self.point_weights[:] = weight
         for i in range(len(points)):
-            self.point_weights[:] = weight
             self.point_weights[i] = 0.0
             level = self._ladder(_robust_levels(ladder), [], [], quiet=True)
+            self.point_weights[i] = weight
             value = sample_trilinear(level.f.numpy(), level.grid, points[i:i + 1])[0]
             misses[i] = value * level.world_h / self.grid.spacing
         self.point_weights[:] = POINT_WEIGHT
