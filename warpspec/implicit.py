@@ -13,7 +13,9 @@
    each level, each level started from the one below. The depth of a highlight is unknown, so
    no value is asked of ``f`` at a ray's hit: the surface's offset comes from the points, its
    shape from the normals, carried across by the smoothness. Rays that miss the current
-   surface pull it, weakly, toward where they pass nearest.
+   surface pull it, weakly, toward where they pass nearest. The points are held nearly
+   exactly, unless fits made without each of them find them noisy
+   (:meth:`ImplicitStart._noisy_points_grid`).
 4. Each ray is weighed robustly (Tukey's biweight on the angle between ``grad f`` and ``N``);
    a highlight whose normal cannot be met with the others (a false detection, another light's
    reflection) is rejected and reported instead of bending the surface. A supple fit follows
