@@ -505,6 +505,32 @@ def test_the_bottle_takes_a_shoulder_width_in_range():
     sharp, plain = make_scene("bottle", shoulder=0.5), make_scene("bottle")
     assert sharp.surface.width == pytest.approx(0.5 * plain.surface.width)
     np.testing.assert_array_equal(sharp.surface.axis, plain.surface.axis)
+    for bad in (0.4, 1.7, True, "1"):
+        with pytest.raises(ws.SceneError, match="body"):
+            make_scene("bottle", body=bad)
+    fat = make_scene("bottle-lamps", body=1.3)
+    assert fat.surface.body == pytest.approx(1.3 * make_scene("bottle-lamps").surface.body)
+    # the domain holds the wider body with its margin
+    assert np.ptp(np.asarray(fat.domain)[:, 0]) > 1.25 * np.ptp(np.asarray(plain.domain)[:, 0])
+    np.testing.assert_array_equal(make_scene("bottle", body=1.0).points, plain.points)
+
+
+def test_a_fat_bottle_with_a_sharp_shoulder_starts_where_it_shows_no_unseen_highlight(
+        monkeypatch):
+    """A body of radius about 0.45 and a shoulder half as wide (seed 0): from the cylinder the
+    profile left the shoulder's top highlights far out and the neck fat, the truth 2.2 voxels
+    from it on average; fitted again where that profile showed its cameras highlights they
+    did not see, 0.07."""
+    synthetic = make_scene("bottle", seed=0, shoulder=0.5, body=1.3)
+    lo, hi = synthetic.domain
+    voxel = Grid.from_bounds(lo, hi, resolution=64).spacing
+    scene = synthetic.scene()
+    origins, dirs = scene.rays()
+    started = fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)[0]
+    assert _truth_distance(synthetic, started, voxel) < 0.3
+    monkeypatch.setattr(R, "_shoulder_starts", lambda *args: [])
+    plain = fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)[0]
+    assert _truth_distance(synthetic, plain, voxel) > 1.0
 
 
 def test_beyond_its_data_the_profile_keeps_its_radius():

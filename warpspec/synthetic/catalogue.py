@@ -461,7 +461,7 @@ BOTTLE_RINGS = {1: ((0.7, 0.3, 20),), 2: ((0.0, 0.0, 14), (1.05, 0.45, 14))}
 
 
 def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
-           rings: int = 2, shoulder: float = 1.0) -> SyntheticScene:
+           rings: int = 2, shoulder: float = 1.0, body: float = 1.0) -> SyntheticScene:
     """A bottle (body, shoulder, neck; a surface of revolution) seen by rings of flashes.
 
     Body radius about 0.35, neck about 0.13, shoulder about 0.35 above the base point, axis
@@ -471,45 +471,50 @@ def bottle(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
     points. The domain holds the bottle's width with a 12% margin and cuts its body below
     (height -0.45) and its neck above (height 0.85), so the truth is an open tube (Euler
     number 0). ``shoulder`` scales the shoulder's width (about 0.09; 0.5: half as wide, a
-    sharper shoulder).
+    sharper shoulder), ``body`` the body's radius (1.3: about 0.45, a deeper shoulder).
 
     Raises:
-        SceneError: If ``rings`` is not 1 or 2, or ``shoulder`` not a number from 0.25 to 3.
+        SceneError: If ``rings`` is not 1 or 2, ``shoulder`` not a number from 0.25 to 3,
+            or ``body`` not a number from 0.5 to 1.6.
     """
     return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=False, rings=rings,
-                   shoulder=shoulder)
+                   shoulder=shoulder, body=body)
 
 
 def bottle_lamps(*, noise: float = 0.0, outliers: float = 0.0, seed: int = 0,
-                 rings: int = 2, shoulder: float = 1.0) -> SyntheticScene:
+                 rings: int = 2, shoulder: float = 1.0, body: float = 1.0) -> SyntheticScene:
     """The ``bottle`` scene's shape and cameras, each camera with its own directional lamp.
 
     Each lamp is 25-40 degrees off its camera's viewing direction (as in
     ``ellipsoid-around``), so a ray is no longer a normal line of the surface.
     """
     return _bottle(noise=noise, outliers=outliers, seed=seed, lamps=True, rings=rings,
-                   shoulder=shoulder)
+                   shoulder=shoulder, body=body)
 
 
 def _bottle(*, noise: float, outliers: float, seed: int, lamps: bool,
-            rings: int, shoulder: float) -> SyntheticScene:
+            rings: int, shoulder: float, body: float) -> SyntheticScene:
     if isinstance(rings, bool) or rings not in BOTTLE_RINGS:
         raise SceneError(f"rings: expected one of {sorted(BOTTLE_RINGS)}, got {rings!r}")
     if (isinstance(shoulder, bool) or not isinstance(shoulder, int | float)
             or not 0.25 <= shoulder <= 3.0):
         raise SceneError(f"shoulder: must be a number from 0.25 to 3 (a scale of the "
                          f"shoulder's width), got {shoulder!r}")
+    if (isinstance(body, bool) or not isinstance(body, int | float)
+            or not 0.5 <= body <= 1.6):
+        raise SceneError(f"body: must be a number from 0.5 to 1.6 (a scale of the body's "
+                         f"radius), got {body!r}")
     rng = _shape_rng(seed, "bottle")
     axis = _normalize(np.array([0.0, 0.0, 1.0]) + 0.05 * rng.standard_normal(3))
     base = rng.uniform(-0.05, 0.05, 3)
-    body = 0.35 * float(rng.uniform(0.93, 1.07))
-    surf = Revolution(base, axis, body=body, neck=0.13 * float(rng.uniform(0.9, 1.1)),
+    radius = 0.35 * float(body) * float(rng.uniform(0.93, 1.07))
+    surf = Revolution(base, axis, body=radius, neck=0.13 * float(rng.uniform(0.9, 1.1)),
                       shoulder=0.35 + float(rng.uniform(-0.04, 0.04)),
                       width=0.09 * float(shoulder) * float(rng.uniform(0.9, 1.1)))
     # The domain: heights -0.45..0.85 along z, the width with a margin (the axis leans a bit,
     # so the cut is taken along z through the tube's ends).
     lo_z, hi_z = base[2] - 0.45, base[2] + 0.85
-    pad = DOMAIN_MARGIN * 2 * body
+    pad = DOMAIN_MARGIN * 2 * radius
     h_lo = (lo_z - base[2]) / axis[2] - 0.2
     h_hi = (hi_z - base[2]) / axis[2] + 0.2
     full = surf.mesh(extent=(h_lo, h_hi))
@@ -698,7 +703,7 @@ def make_scene(name: str, *, noise: float = 0.0, outliers: float = 0.0, seed: in
             (``sphere-around`` to ``point-light``) also of the geometry (sizes, bumps, camera
             jitter, which points are chosen). The paper's scenes keep a fixed geometry.
         **options: Options only some scenes take (``freeform``: ``highlights``; ``wrap``:
-            ``span``; ``bottle`` and ``bottle-lamps``: ``rings``, ``shoulder``).
+            ``span``; ``bottle`` and ``bottle-lamps``: ``rings``, ``shoulder``, ``body``).
         point_noise: Standard deviation of Gaussian noise added to each coordinate of the
             point constraints (:func:`~warpspec.synthetic.scenes.jitter_points`), in voxels
             of the default grid: the domain's longest side over :data:`NOISE_RESOLUTION`.
