@@ -146,6 +146,13 @@ voxels; the profiles near the truth, 0-3.4 (a fat bottle's sharp shoulder, seed 
 LEDGE_SIZE = 5.0 / 64.0
 """Deepest drop at slopes over :data:`LEDGE_SLOPE` a profile from another start has, as a share
 of the domain's largest side (5 voxels at resolution 64, whatever the grid)."""
+START_MET_DEG = 3.0
+"""Other starts are tried only where the profile fitted from the cylinder meets at least
+:data:`START_MET_SHARE` of its lines within this many degrees: one that misses more is no
+surface of revolution whatever its start (the blob seen all around tries one about its lines
+before its grid fit, and the other starts cost it 3.3 s)..."""
+START_MET_SHARE = 0.5
+"""...this share."""
 SHOULDER_CENTRES = (0.2, 0.35, 0.5, 0.65, 0.8)
 """Where, as shares of the gap between two points of different radii, the profile's other
 starts by flash put the drop between them (:func:`_shoulder_starts`)..."""
@@ -384,12 +391,17 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     # a line that the profile fitted without it misses by more than LEAVE_OUT_DEG is left
     # out, the worst first, one at a time: a false highlight's line that passes near the axis
     # asks a slope at a height no other datum holds, and the profile follows it
-    start = _profile_start(profile, ph[keep], prho[keep], p[near], n[near], lo=lo, hi=hi,
-                           scale=scale, voxel=voxel)
+    start = None
     for left_out in range(LEAVE_OUT_PASSES + 1):
-        radii, misses, point_misses, _ = _fit_profile(
-            profile, ph[keep], prho[keep], p[near], n[near], scale=scale, voxel=voxel,
-            radii=start, leave_out=True)
+        fit = _fit_profile(profile, ph[keep], prho[keep], p[near], n[near], scale=scale,
+                           voxel=voxel, radii=start, leave_out=True)
+        if left_out == 0:
+            start = _profile_start(profile, fit, ph[keep], prho[keep], p[near], n[near],
+                                   lo=lo, hi=hi, scale=scale, voxel=voxel)
+            if start is not None:
+                fit = _fit_profile(profile, ph[keep], prho[keep], p[near], n[near],
+                                   scale=scale, voxel=voxel, radii=start, leave_out=True)
+        radii, misses, point_misses, _ = fit
         worst = np.where(np.isfinite(misses), misses, -1.0)
         # (a line is left out only where a refit follows: the radii are made without it)
         if (worst.max() <= LEAVE_OUT_DEG or near.sum() <= MIN_RAYS
@@ -403,10 +415,13 @@ def fit_revolution(starts: np.ndarray, dirs: np.ndarray, points: np.ndarray, *,
     return SurfaceOfRevolution(c, a, heights, radii), near
 
 
-def _profile_start(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
-                   p: np.ndarray, n: np.ndarray, *, lo: np.ndarray, hi: np.ndarray,
-                   scale: float, voxel: float) -> np.ndarray | None:
+def _profile_start(profile: SurfaceOfRevolution, plain: ProfileFit, ph: np.ndarray,
+                   prho: np.ndarray, p: np.ndarray, n: np.ndarray, *, lo: np.ndarray,
+                   hi: np.ndarray, scale: float, voxel: float) -> np.ndarray | None:
     """The radii a profile by flash starts from: ``None``, the cylinder, unless that errs.
+
+    ``plain`` is the profile fitted from the cylinder to the points ``(ph, prho)`` and the
+    lines ``p + s n``.
 
     The profile is fitted by rounds of meeting and refitting, and a flatness that is no square
     (:data:`FLATNESS`) has more than one minimum: between a band of highlights on a shoulder
@@ -418,31 +433,38 @@ def _profile_start(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarra
     truth, none). So when the profile fitted from the cylinder shows
     :func:`_unseen_highlights`, it is fitted again from drops at several heights and widths
     between the points (:func:`_shoulder_starts`), and the start whose profile shows the
-    fewest, then costs least (:func:`_profile_energy`), is taken.
+    fewest (at most :data:`UNSEEN_SHARE` of the cylinder's), then costs least
+    (:func:`_profile_energy`), is taken; never one with a ledge (:data:`LEDGE_SLOPE`), and none
+    where the cylinder's profile meets fewer than :data:`START_MET_SHARE` of its lines.
     """
     middle = 0.5 * (profile.heights[1:] + profile.heights[:-1])
     held = (middle >= ph.min()) & (middle <= ph.max())
     step = profile.heights[1] - profile.heights[0]
 
-    def fitted(radii: np.ndarray | None) -> tuple[int, float] | None:
-        fit = _fit_profile(profile, ph, prho, p, n, scale=scale, voxel=voxel, radii=radii)
+    def shape(fit: ProfileFit) -> tuple[SurfaceOfRevolution, tuple[int, float]] | None:
         if not np.all(np.isfinite(fit.radii)):
             return None  # a steep start's system may overflow: no profile, no start
         drop = np.abs(np.diff(fit.radii))[held]
         if drop[drop > LEDGE_SLOPE * step].sum() > LEDGE_SIZE * scale:
             return None
         surface = SurfaceOfRevolution(profile.base, profile.axis, profile.heights, fit.radii)
-        return _unseen_highlights(surface, p, n, lo=lo, hi=hi, voxel=voxel), fit.energy
+        return surface, (_unseen_highlights(surface, p, n, lo=lo, hi=hi, voxel=voxel),
+                         fit.energy)
 
-    plain = fitted(None)
-    if plain is None or plain[0] == 0:
+    cylinder = shape(plain)
+    if cylinder is None or cylinder[1][0] == 0:
         return None
-    best, chosen = plain, None
+    hits, inside = cylinder[0].intersect(p, n, lo, hi, step=voxel)
+    met = miss_deg(cylinder[0].gradient(hits), -n, inside) <= START_MET_DEG
+    if np.mean(met) < START_MET_SHARE:
+        return None
+    best, chosen = cylinder[1], None
     for radii in _shoulder_starts(profile.heights, ph, prho, voxel):
-        score = fitted(radii)
-        if score is not None and score < best:
-            best, chosen = score, radii
-    return chosen if best[0] <= UNSEEN_SHARE * plain[0] else None
+        tried = shape(_fit_profile(profile, ph, prho, p, n, scale=scale, voxel=voxel,
+                                   radii=radii))
+        if tried is not None and tried[1] < best:
+            best, chosen = tried[1], radii
+    return chosen if best[0] <= UNSEEN_SHARE * cylinder[1][0] else None
 
 
 def _shoulder_starts(heights: np.ndarray, ph: np.ndarray, prho: np.ndarray,
