@@ -158,7 +158,7 @@ SHOULDER_CENTRES = (0.2, 0.35, 0.5, 0.65, 0.8)
 starts by flash put the drop between them (:func:`_shoulder_starts`)..."""
 SHOULDER_WIDTHS = (0.1, 0.25)
 """...and over what share of that gap it falls."""
-SHOULDER_RADII_VOXELS = 2.0
+SHOULDER_RADII_VOXELS = 4.0
 """Least difference of radius (voxels) between two points, neighbours in height, across
 which those starts are tried: a bottle's body and its neck."""
 SHOULDER_GAPS = 2
@@ -879,6 +879,8 @@ def _fit_profile(profile: SurfaceOfRevolution, ph: np.ndarray, prho: np.ndarray,
             slopes=(hh[use], nh[use], nr[use], np.sqrt(weights[use])), bend=bend)
         flat = _flatness_weights(heights, radii, points[0])
         radii, out = solve(flat=flat)
+        if not leave_out and not np.all(np.isfinite(radii)):
+            break  # an overflowing system (a steep start's): no profile, and no more rounds
         solved = radii  # the cost is the solve's, before the radii are clipped at zero
         if final and leave_out:
             # the out-of-sample misses without the flatness: its weights come from the
