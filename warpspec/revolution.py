@@ -160,7 +160,9 @@ SHOULDER_WIDTHS = (0.1, 0.25)
 """...and over what share of that gap it falls."""
 SHOULDER_RADII_VOXELS = 4.0
 """Least difference of radius (voxels) between two points, neighbours in height, across
-which those starts are tried: a bottle's body and its neck."""
+which those starts are tried: a bottle's body and its neck (11 voxels on the catalogue's), not
+the points' own noise (a voxel per axis put neighbours of the bottle seed 2 2.5-3.1 voxels
+apart, and the starts across them only overflowed)."""
 SHOULDER_GAPS = 2
 """Most gaps between points tried so, those with the largest differences of radius first."""
 SLOPE_LIMIT_DEG = 20.0
