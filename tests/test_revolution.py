@@ -515,6 +515,15 @@ def test_the_bottle_takes_a_shoulder_width_in_range():
     np.testing.assert_array_equal(make_scene("bottle", body=1.0).points, plain.points)
 
 
+def _started_and_plain(synthetic, monkeypatch):
+    """The profile fitted by flash as it is, and from the cylinder alone (no other start
+    tried), with the voxel of the grid at 64."""
+    voxel = Grid.from_bounds(*synthetic.domain, resolution=64).spacing
+    started = _fit(synthetic, voxel)[0]
+    monkeypatch.setattr(R, "_shoulder_starts", lambda *args: [])
+    return started, _fit(synthetic, voxel)[0], voxel
+
+
 def test_a_fat_bottle_with_a_sharp_shoulder_starts_where_it_shows_no_unseen_highlight(
         monkeypatch):
     """A body of radius about 0.45 and a shoulder half as wide (seed 0): from the cylinder the
@@ -522,14 +531,8 @@ def test_a_fat_bottle_with_a_sharp_shoulder_starts_where_it_shows_no_unseen_high
     from it on average; fitted again where that profile showed its cameras highlights they
     did not see, 0.07."""
     synthetic = make_scene("bottle", seed=0, shoulder=0.5, body=1.3)
-    lo, hi = synthetic.domain
-    voxel = Grid.from_bounds(lo, hi, resolution=64).spacing
-    scene = synthetic.scene()
-    origins, dirs = scene.rays()
-    started = fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)[0]
+    started, plain, voxel = _started_and_plain(synthetic, monkeypatch)
     assert _truth_distance(synthetic, started, voxel) < 0.3
-    monkeypatch.setattr(R, "_shoulder_starts", lambda *args: [])
-    plain = fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)[0]
     assert _truth_distance(synthetic, plain, voxel) > 1.0
 
 
@@ -982,15 +985,15 @@ def test_a_profile_by_flash_starts_where_it_shows_no_highlight_its_cameras_misse
     cameras above 25 highlights they did not see; started from drops between the points,
     none, and 0.06 voxel."""
     synthetic = make_scene("bottle", seed=3, shoulder=0.5)
+    started, plain, voxel = _started_and_plain(synthetic, monkeypatch)
     lo, hi = synthetic.domain
-    voxel = Grid.from_bounds(lo, hi, resolution=64).spacing
-    scene = synthetic.scene()
-    origins, dirs = scene.rays()
-    started = fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)[0]
-    assert R._unseen_highlights(started, origins, dirs, lo=lo, hi=hi, voxel=voxel) == 0
-    monkeypatch.setattr(R, "_shoulder_starts", lambda *args: [])
-    plain = fit_revolution(origins, dirs, scene.points, lo=lo, hi=hi, voxel=voxel)[0]
-    assert R._unseen_highlights(plain, origins, dirs, lo=lo, hi=hi, voxel=voxel) > 5
+
+    def unseen(surface):
+        return R._unseen_highlights(surface, *synthetic.scene().rays(), lo=lo, hi=hi,
+                                    voxel=voxel)
+
+    assert unseen(started) == 0
+    assert unseen(plain) > 5
     assert _truth_distance(synthetic, started, voxel) < 0.3
     assert (_truth_distance(synthetic, plain, voxel)
             > _truth_distance(synthetic, started, voxel) + 0.3)

@@ -456,8 +456,7 @@ def _profile_start(profile: SurfaceOfRevolution, plain: ProfileFit, ph: np.ndarr
     cylinder = shape(plain)
     if cylinder is None or cylinder[1][0] == 0:
         return None
-    hits, inside = cylinder[0].intersect(p, n, lo, hi, step=voxel)
-    met = miss_deg(cylinder[0].gradient(hits), -n, inside) <= START_MET_DEG
+    met = _misses(cylinder[0], p, n, -n, lo=lo, hi=hi, voxel=voxel) <= START_MET_DEG
     if np.mean(met) < START_MET_SHARE:
         return None
     best, chosen = cylinder[1], None
