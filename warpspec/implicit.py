@@ -1287,7 +1287,9 @@ class ImplicitStart:
             return previous
         median = self._kept_median(previous)
         live = self.kind.numpy() != K.ANCHOR_NONE
-        trial = self.excluded & live & (True if among is None else among)
+        trial = self.excluded & live
+        if among is not None:
+            trial &= among
         if not trial.any() or median > TRIAL_DEG:
             return previous
         before, miss_before = self.excluded.copy(), self.residual.copy()
