@@ -186,7 +186,11 @@ def test_a_false_highlight_missed_by_a_few_degrees_is_told_apart_by_a_refit_with
     at 5.8) lie between 3 and 10, 5.3% against the 5% allowed, and the refit without the 9
     is no better (the grid fit made instead came out 0.51 voxel from the truth). Fitted to
     the rays met within 3 degrees, it misses the false one by 15 and meets the true one: exactly
-    the false highlights are rejected, and the shoulder the false one bent comes back."""
+    the false highlights are rejected, and the shoulder the false one bent comes back. The
+    fits' last bits differ between machines, and on some the refits ran out first, each
+    meeting more normals than the one before (27 of 38 the last, a false one at 6.1 degrees
+    and a true one at 5.5): the fit to the rays met within 3 degrees is made then too (the
+    grid fit made instead, 0.44 h off end to end; now 0.025)."""
     assert _revolution_rejecting_the_false(seed=11, outliers=0.25) < 0.2
 
 
