@@ -665,13 +665,14 @@ def test_false_highlights_side_by_side_stay_out_unless_each_foresees_the_other()
     assert {18, 28} <= set(solver.fit_report.rejected.tolist())
 
 
-def _rejected_true_and_false(synthetic) -> tuple[int, int]:
-    """How many true and how many false highlights the start rejects, at resolution 64."""
+def _rejected_true_and_false(synthetic) -> tuple[int, int, str | None]:
+    """How many true and how many false highlights the start rejects, at resolution 64, and
+    the prior of its grid fit."""
     solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
     rejected = np.zeros(synthetic.outlier_mask.shape, dtype=bool)
     rejected[solver.fit_report.rejected] = True
     return (int((rejected & ~synthetic.outlier_mask).sum()),
-            int((rejected & synthetic.outlier_mask).sum()))
+            int((rejected & synthetic.outlier_mask).sum()), solver.fit_report.prior)
 
 
 def test_cross_validation_goes_on_until_no_ray_is_missed():
@@ -680,7 +681,7 @@ def test_cross_validation_goes_on_until_no_ray_is_missed():
     29 of 58 rays out of sample, true ones worst. Stopped after 8 passes, it had rejected 14
     true highlights and 10 false, and the patch was 1.05 h from the truth. Its passes now end
     where none is missed (the tenth); the true ones come back, and 9 false stay out."""
-    true, false = _rejected_true_and_false(make_scene("freeform", seed=302, outliers=0.25))
+    true, false, _ = _rejected_true_and_false(make_scene("freeform", seed=302, outliers=0.25))
     assert true <= 1 and false >= 9
 
 
@@ -691,7 +692,7 @@ def test_rays_the_robust_passes_rejected_are_tried_back_apart_from_the_false_one
     ones were met too, the kept median grew, none came back, and with 10 true rays out the
     verdict refused the patch. Tried back first by themselves, from the fit without the false
     ones, the steep region's rays come back, then those cross-validation rejected."""
-    true, false = _rejected_true_and_false(make_scene("freeform", seed=23, outliers=0.25))
+    true, false, _ = _rejected_true_and_false(make_scene("freeform", seed=23, outliers=0.25))
     assert true <= 2 and false >= 11
 
 
@@ -701,12 +702,9 @@ def test_two_grid_fits_are_told_apart_by_their_points_when_the_rays_cannot():
     kept rays (55 to 54); by that count it was taken, 0.42 h from the truth. The points left
     out one at a time lie 0.26 voxel from its fits in the median and 0.08 from the quadric's:
     the quadric's fit is taken, 3 false highlights rejected, 0.19 h (clean 0.085)."""
-    synthetic = make_scene("freeform", seed=17, outliers=0.1)
-    solver = ws.Reconstructor(synthetic.scene(), resolution=64, device="cpu")
-    assert solver.fit_report.prior == "quadric"
-    rejected = np.zeros(synthetic.outlier_mask.shape, dtype=bool)
-    rejected[solver.fit_report.rejected] = True
-    assert int((rejected & synthetic.outlier_mask).sum()) >= 3
+    _, false, prior = _rejected_true_and_false(make_scene("freeform", seed=17, outliers=0.1))
+    assert prior == "quadric"
+    assert false >= 3
 
 
 def test_better_fit_lets_the_points_decide_only_when_far_apart():

@@ -364,7 +364,7 @@ NOISY_GRID_POINTS = 4
 """Fewest points the grid fit's noise judgement is made with (a median of fewer says little),
 and the comparison of two grid fits by their points (PRIOR_POINTS_RATIO)."""
 PRIOR_POINTS_RATIO = 2.0
-"""Two grid fits about different priors (:meth:`ImplicitStart._better_fit`): when the fits made
+"""Two grid fits about different priors (:func:`_better_fit`): when the fits made
 without each point (:meth:`ImplicitStart._point_misses`, the points held) pass this many times
 nearer to it about one prior than about the other (the median distance), that prior's fit is
 taken; otherwise the one that explains more kept rays (:meth:`ImplicitStart._fit_score`). The
@@ -707,9 +707,9 @@ def _better_fit(judged: tuple[tuple[int, float], np.ndarray | None],
     """
     (score, misses), (other_score, other_misses) = judged, other
     if misses is not None and other_misses is not None:
-        near, far = sorted((np.median(misses), np.median(other_misses)))
-        if far > PRIOR_POINTS_RATIO * near:
-            return np.median(misses) == near
+        mine, theirs = np.median(misses), np.median(other_misses)
+        if max(mine, theirs) > PRIOR_POINTS_RATIO * min(mine, theirs):
+            return mine < theirs
     return score > other_score
 
 
@@ -944,8 +944,6 @@ class ImplicitStart:
         the ray count as met (PIXEL_MET, then PIXEL_NOISE when no shape was the start)."""
         self._noisier = False
         """Whether some ray would be met within PIXEL_NOISE pixels but not PIXEL_MET."""
-        self._held_misses: np.ndarray | None = None
-        """The last grid fit's points' distances from the fits made without each (voxels)."""
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -1014,8 +1012,8 @@ class ImplicitStart:
                 if shaped:
                     name = _PRIOR_NAMES.get(type(prior), "quadric")
                     self._say(f"the grid fit about the {name}")
-                level = self._grid_fit(ladder, rounds, cg)
-                judged = (self._fit_score(level), self._held_misses)
+                level, misses = self._grid_fit(ladder, rounds, cg)
+                judged = (self._fit_score(level), misses)
                 if best is not None and not _better_fit(judged, best[0]):
                     continue
                 pockets = self._take_fit(level, out)
@@ -1116,8 +1114,12 @@ class ImplicitStart:
             return None
         return level
 
-    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int]) -> _Level:
-        """The grid fit about the current prior, false highlights rejected; the last level.
+    def _grid_fit(self, ladder: list[int], rounds: list[int], cg: list[int]
+                  ) -> tuple[_Level, np.ndarray | None]:
+        """The grid fit about the current prior, false highlights rejected.
+
+        Returns the last level and the points' distances from the fits made without each
+        (:meth:`_noisy_points_grid`).
 
         Robust passes on the coarse levels, stiff to supple: each rejects the rays whose
         normals it misses by far more than the others'; a stiff fit cannot bend to a false
@@ -1163,7 +1165,7 @@ class ImplicitStart:
         return self._noisy_points_grid(previous, ladder, rounds, cg)
 
     def _noisy_points_grid(self, previous: _Level, ladder: list[int], rounds: list[int],
-                           cg: list[int]) -> _Level:
+                           cg: list[int]) -> tuple[_Level, np.ndarray | None]:
         """``previous``, or the ladder refitted from it with the points weighed as noisy.
 
         Each point is left out in turn from a fit of the robust levels (from the prior, the
@@ -1174,16 +1176,15 @@ class ImplicitStart:
         :data:`NOISY_GRID_GAIN` (the median miss).
 
         The rays are left anchored on the fit of the last level made; the caller anchors
-        them on the fit returned (:meth:`_fit_score`). The distances of the points at
-        POINT_WEIGHT are kept in ``_held_misses`` (``None`` with too few points), to compare
-        fits about different priors by (:func:`_better_fit`).
+        them on the fit returned (:meth:`_fit_score`). Returned beside the fit: the points'
+        distances at POINT_WEIGHT (``None`` with too few points), by which fits about
+        different priors are compared (:func:`_better_fit`).
         """
-        self._held_misses = None
         if self.scene.num_points < NOISY_GRID_POINTS:
-            return previous
+            return previous, None
         self._say(f"the points left out one at a time ({2 * self.scene.num_points} fits)")
-        self._held_misses = np.abs(self._point_misses(POINT_WEIGHT, ladder))
-        held = np.median(self._held_misses)
+        misses = np.abs(self._point_misses(POINT_WEIGHT, ladder))
+        held = np.median(misses)
         loose = np.median(np.abs(self._point_misses(NOISY_GRID_POINT_WEIGHT, ladder)))
         if loose < NOISY_GRID_RATIO * held:
             missed = self._kept_median(previous)
@@ -1191,9 +1192,9 @@ class ImplicitStart:
             self.point_weights[:] = NOISY_GRID_POINT_WEIGHT
             refit = self._ladder(ladder, rounds, cg, quiet=True, start=previous)
             if self._kept_median(refit) < NOISY_GRID_GAIN * missed:
-                return refit
+                return refit, misses
             self.point_weights[:] = POINT_WEIGHT
-        return previous
+        return previous, misses
 
     def _point_misses(self, weight: float, ladder: list[int]) -> np.ndarray:
         """Each point's distance (voxels of the grid) from a fit made without it.
