@@ -345,6 +345,39 @@ def test_missing_matplotlib_is_refused_before_the_run(capsys, scene, tmp_path, m
                                        "pip install 'warpspec[plot]'")
 
 
+def test_the_report_lists_every_rejected_highlight(capsys, tmp_path):
+    """The summary names the first rejected highlights and counts the rest; ``--report``
+    writes every one (index, camera, pixel, residual), with the verdict and the start. The
+    sphere seen all around by flash, a quarter of its 28 highlights false: 7 rejected, each a
+    false one, by the quadric start."""
+    from warpspec.synthetic import make_scene
+
+    synthetic = make_scene("sphere-around", seed=0, outliers=0.25)
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(synthetic.scene_dict))
+    report = tmp_path / "run.json"
+    status = main([str(a) for a in ("reconstruct", path, "-o", tmp_path / "m.ply",
+                                    "--resolution", "32", "--iterations", "10",
+                                    "--device", "cpu", "--report", report)])
+    err = capsys.readouterr().err
+    assert status == 0, err
+    record = json.loads(report.read_text())
+    rows = record["rejected"]
+    false = set(np.flatnonzero(synthetic.outlier_mask).tolist())
+    assert len(rows) > 5 and {r["index"] for r in rows} <= false
+    assert f"{len(rows)} of 28 highlights rejected" in err
+    assert f"and {len(rows) - 5} more (--report lists all)" in err
+    scene_rows = synthetic.scene_dict["specularities"]
+    for r in rows:
+        assert r["camera"] == scene_rows[r["index"]]["camera"]
+        assert r["pixel"] == pytest.approx(scene_rows[r["index"]]["pixel"])
+        assert r["residual_deg"] > 15.0
+    assert record["verdict"]["supported"] and record["verdict"]["rays"] == 28
+    assert record["start"] == {"guess": "sphere", "shape": "quadric", "prior": None}
+    assert record["mesh"] == str(tmp_path / "m.ply") and record["faces"] > 0
+    assert record["grid"]["shape"] == [33, 33, 33] and record["iterations"] == 10
+
+
 def test_info_lists_versions_devices_and_the_cache(capsys):
     status = main(["info"])
     out = capsys.readouterr().out

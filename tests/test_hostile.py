@@ -229,10 +229,18 @@ def test_every_ray_missing_exits_3_and_writes_nothing(capsys, tmp_path):
     _rays_miss(data)
     scene = tmp_path / "miss.json"
     scene.write_text(json.dumps(data))
-    status, err = run(capsys, "reconstruct", scene, "-o", tmp_path / "x.ply", *FAST)
+    report = tmp_path / "run.json"
+    status, err = run(capsys, "reconstruct", scene, "-o", tmp_path / "x.ply", *FAST,
+                      "--report", report)
     assert status == 3, err
     assert "NOT supported by the data: 0 of 24 specular rays meet the surface" in err
     assert not (tmp_path / "x.ply").exists()
+    # the report says why, and that no mesh was written
+    record = json.loads(report.read_text())
+    assert record["mesh"] is None and not record["verdict"]["supported"]
+    assert record["verdict"]["hit_fraction"] == 0.0
+    assert any("specular rays meet the surface" in r for r in record["verdict"]["reasons"])
+    report.unlink()
     status, err = run(capsys, "reconstruct", scene, "-o", tmp_path / "x.ply", *FAST,
                       "--keep-unsupported")
     assert status == 0, err

@@ -62,10 +62,12 @@ __all__ = ["atomic_write", "build_parser", "main", "write_mesh", "write_metrics"
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
 METRIC_FORMATS = (".csv", ".json")
 PICTURE_FORMATS = (".png", ".pdf", ".svg")
+REPORT_FORMATS = (".json",)
 SCENE_FORMATS = (".json",)
 
 _REJECTED_SHOWN = 5
-"""Rejected highlights named in the summary; the rest are counted (``Result.rejected`` has all)."""
+"""Rejected highlights named in the summary; the rest are counted (``Result.rejected`` and
+``--report`` have all)."""
 
 # Names of Python options in the API's messages and the flags that set them.
 _FLAGS = {
@@ -114,6 +116,57 @@ def _metrics_writer(history: list[dict], suffix: str) -> Callable[[Path], None]:
                 writer = csv.DictWriter(f, fieldnames=list(history[0]))
                 writer.writeheader()
                 writer.writerows(history)
+
+    return write
+
+
+def _finite(value):
+    """``value`` with every non-finite float (NaN, inf) in it made ``None``, for JSON."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _run_report(result, *, scene_path: Path, mesh_path: Path | None, faces: int,
+               fit_report=None, seconds: float) -> dict:
+    """The record of one reconstruction that ``--report`` writes (JSON-ready).
+
+    Args:
+        result: The :class:`~warpspec.solver.Result`.
+        scene_path: The scene file read.
+        mesh_path: The mesh written, or ``None`` when none was (the data does not support it).
+        faces: Triangles in the mesh (after any crop).
+        fit_report: The start's :class:`~warpspec.implicit.FitReport`, when it was fitted.
+        seconds: Wall time from the set-up to the end.
+    """
+    from dataclasses import asdict
+
+    start = None if fit_report is None else {
+        "guess": fit_report.guess, "shape": fit_report.shape, "prior": fit_report.prior}
+    last = result.history[-1] if result.history else {}
+    return _finite({
+        "scene": str(scene_path),
+        "mesh": None if mesh_path is None else str(mesh_path),
+        "faces": int(faces),
+        "verdict": None if result.verdict is None else asdict(result.verdict),
+        "rejected": list(result.rejected),
+        "start": start,
+        "grid": {"shape": [int(n) for n in result.grid.shape],
+                 "spacing": float(result.grid.spacing),
+                 "origin": [float(v) for v in result.grid.origin]},
+        "iterations": last.get("iteration"),
+        "missed_rays": last.get("misses"),
+        "seconds": float(seconds),
+    })
+
+
+def _json_writer(record: dict) -> Callable[[Path], None]:
+    def write(tmp: Path) -> None:
+        tmp.write_text(json.dumps(record, indent=1) + "\n")
 
     return write
 
@@ -317,10 +370,11 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     save_phi = output_path(args.save_phi, (".npz",), "--save-phi") if args.save_phi else None
     render = output_path(args.render, PICTURE_FORMATS, "--render") if args.render else None
     plot = output_path(args.plot, PICTURE_FORMATS, "--plot") if args.plot else None
+    report = output_path(args.report, REPORT_FORMATS, "--report") if args.report else None
     resume = input_file(args.resume, "--resume") if args.resume else None
     scene_path = input_file(args.scene, "scene")
     check_paths({"--output": out, "--metrics": metrics, "--save-phi": save_phi,
-                 "--render": render, "--plot": plot},
+                 "--render": render, "--plot": plot, "--report": report},
                 {"the scene": scene_path, "--resume": resume})
     if render is not None or plot is not None:
         from .plots import require_matplotlib
@@ -380,8 +434,14 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     progress.done("meshing")
     verdict = result.verdict
     if not verdict.supported and not args.keep_unsupported:
-        _say(f"{verdict.summary()}; nothing was written (--keep-unsupported writes the "
-             "outputs anyway)")
+        written = ""
+        if report is not None:
+            atomic_write(report, _json_writer(_run_report(
+                result, scene_path=scene_path, mesh_path=None, faces=len(result.faces),
+                fit_report=solver.fit_report, seconds=time.perf_counter() - start)))
+            written = f" but the report {report}"
+        _say(f"{verdict.summary()}; nothing was written{written} (--keep-unsupported writes "
+             "the outputs anyway)")
         return EXIT_UNSUPPORTED
 
     mesh = result  # its vertices and faces; result.mesh (trimesh) only where one is needed
@@ -445,6 +505,10 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
             outputs.stage(plot, lambda tmp: plot_history(
                 result.history, tmp, title=f"{Path(args.scene).name}: convergence"))
+        if report is not None:
+            outputs.stage(report, _json_writer(_run_report(
+                result, scene_path=scene_path, mesh_path=out, faces=len(mesh.faces),
+                fit_report=solver.fit_report, seconds=time.perf_counter() - start)))
         outputs.commit()
 
     last = result.history[-1]
@@ -460,9 +524,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
                 f"{r['pixel'][1]:.1f}, {_fmt(r['residual_deg'], '.0f')} deg)"
                 for r in result.rejected[:_REJECTED_SHOWN])
             more = len(result.rejected) - _REJECTED_SHOWN
+            rest = f" and {more} more (--report lists all)" if more > 0 else ""
             _say(f"{len(result.rejected)} of {scene.num_specularities} highlights rejected as "
-                 f"inconsistent with the others: {shown}" + (f" and {more} more" if more > 0
-                                                              else ""))
+                 f"inconsistent with the others: {shown}{rest}")
         if verdict.supported:
             _say(verdict.summary())
         begun = f" (resumed from {resume})" if resume is not None else ""
@@ -698,10 +762,16 @@ def build_parser() -> argparse.ArgumentParser:
                           "what auto keeps, the faces inside the hull of the constraints; "
                           "support: the faces within 3 voxels of a constraint "
                           "(a ray's hit or a point)")
+    rec.add_argument("--report", default=None, metavar="FILE.json",
+                     help="write the run's record: the verdict and its figures, every "
+                          "highlight rejected (index, camera, pixel, residual), the start's "
+                          "shape, the grid, the time (written also when the data does not "
+                          "support the result)")
     rec.add_argument("--keep-unsupported", action="store_true",
                      help="write the outputs even when the data does not support the result "
                           "(most rays miss, the normals or the points disagree with the "
-                          "surface); without it such a run writes nothing and exits with 3")
+                          "surface); without it such a run writes nothing but --report and "
+                          "exits with 3")
     rec.add_argument("--render", default=None, metavar="FILE.png",
                      help="draw views of the mesh with the constraint points and normals "
                           "(needs matplotlib)")
