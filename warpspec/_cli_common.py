@@ -18,6 +18,7 @@ __all__ = [
     "finite",
     "input_file",
     "integer",
+    "json_safe",
     "non_negative",
     "non_negative_int",
     "output_path",
@@ -53,6 +54,17 @@ def input_file(path: str, flag: str) -> Path:
             hint = "; for a COLMAP model, make a scene file with 'warpspec import-colmap' first"
         raise InputError(f"{flag}: {path!r} is a folder, expected a file{hint}")
     return p
+
+
+def json_safe(value):
+    """``value`` with every non-finite float in it (NaN, inf) made ``None``: standard JSON."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def _int_at_least(text: str, low: int | None, what: str) -> int:

@@ -50,6 +50,7 @@ from ._cli_common import (
     add_option,
     finite,
     input_file,
+    json_safe,
     non_negative,
     non_negative_int,
     output_path,
@@ -104,13 +105,9 @@ EXIT_TERMINATED = 143  # SIGTERM
 
 
 def _metrics_writer(history: list[dict], suffix: str) -> Callable[[Path], None]:
-    def clean(v):
-        return None if isinstance(v, float) and not math.isfinite(v) else v
-
     def write(tmp: Path) -> None:
         if suffix == ".json":
-            rows = [{k: clean(v) for k, v in row.items()} for row in history]
-            tmp.write_text(json.dumps(rows, indent=1) + "\n")
+            tmp.write_text(json.dumps(json_safe(history), indent=1) + "\n")
         else:
             with open(tmp, "w", newline="") as f:
                 writer = csv.DictWriter(f, fieldnames=list(history[0]))
@@ -118,17 +115,6 @@ def _metrics_writer(history: list[dict], suffix: str) -> Callable[[Path], None]:
                 writer.writerows(history)
 
     return write
-
-
-def _finite(value):
-    """``value`` with every non-finite float (NaN, inf) in it made ``None``, for JSON."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 def _run_report(result, *, scene_path: Path, mesh_path: Path | None, faces: int,
@@ -148,7 +134,7 @@ def _run_report(result, *, scene_path: Path, mesh_path: Path | None, faces: int,
     start = None if fit_report is None else {
         "guess": fit_report.guess, "shape": fit_report.shape, "prior": fit_report.prior}
     last = result.history[-1] if result.history else {}
-    return _finite({
+    return json_safe({
         "scene": str(scene_path),
         "mesh": None if mesh_path is None else str(mesh_path),
         "faces": int(faces),
@@ -433,12 +419,17 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     result = solver.result(crop=args.crop in ("auto", "hull"))
     progress.done("meshing")
     verdict = result.verdict
+
+    def record(mesh_path: Path | None, faces: int) -> Callable[[Path], None]:
+        """The writer of the ``--report`` file (the mesh written, or ``None``)."""
+        return _json_writer(_run_report(result, scene_path=scene_path, mesh_path=mesh_path,
+                                        faces=faces, fit_report=solver.fit_report,
+                                        seconds=time.perf_counter() - start))
+
     if not verdict.supported and not args.keep_unsupported:
         written = ""
         if report is not None:
-            atomic_write(report, _json_writer(_run_report(
-                result, scene_path=scene_path, mesh_path=None, faces=len(result.faces),
-                fit_report=solver.fit_report, seconds=time.perf_counter() - start)))
+            atomic_write(report, record(None, len(result.faces)))
             written = f" but the report {report}"
         _say(f"{verdict.summary()}; nothing was written{written} (--keep-unsupported writes "
              "the outputs anyway)")
@@ -506,9 +497,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             outputs.stage(plot, lambda tmp: plot_history(
                 result.history, tmp, title=f"{Path(args.scene).name}: convergence"))
         if report is not None:
-            outputs.stage(report, _json_writer(_run_report(
-                result, scene_path=scene_path, mesh_path=out, faces=len(mesh.faces),
-                fit_report=solver.fit_report, seconds=time.perf_counter() - start)))
+            outputs.stage(report, record(out, len(mesh.faces)))
         outputs.commit()
 
     last = result.history[-1]

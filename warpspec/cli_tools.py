@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from ._atomic import StagedOutputs, atomic_write, check_paths, check_size
-from ._cli_common import finite, input_file, integer, output_path
+from ._cli_common import finite, input_file, integer, json_safe, output_path
 from .errors import InputError
 
 __all__ = ["EVALUATE_DEFINITIONS", "add_parsers"]
@@ -349,20 +348,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                     args.spacing is None else None)
         if result.normal_angles is not None:
             data["normal_angle_deg"]["values"] = [float(a) for a in result.normal_angles]
-        text = json.dumps(_clean(data), indent=1) + "\n"
+        text = json.dumps(json_safe(data), indent=1) + "\n"
         atomic_write(json_out, lambda tmp: tmp.write_text(text))
     return 0
-
-
-def _clean(value):
-    """Replace non-finite floats by ``None`` so that the JSON is standard."""
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 # --------------------------------------------------------------------------------------------
