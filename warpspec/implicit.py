@@ -217,8 +217,8 @@ quarter false grows with them."""
 CV_DEG = 10.0
 """A cross-validation pass rejects a ray whose normal the fit made without it misses by more
 than this (degrees), or by more than CV_HULL_DEG where the ray meets the reference at a corner
-of the kept hits' hull (seen from one side) with no other hit as near as the hits' median
-spacing (CV_NEAR): there a fit without it extrapolates. The passes
+of the kept hits' hull, and of the first pass's (seen from one side), with no other hit as
+near as the hits' median spacing (CV_NEAR): there a fit without it extrapolates. The passes
 fit the finest level up to ROBUST_TOP (32 cells at 64): at 16 cells the fit cannot hold the
 free-form patch's bump, and true normals were missed out of sample by up to 15-18 degrees,
 with 60 highlights or 120, as many false ones were (10-20). At 32 cells, clean, with 120
@@ -1493,7 +1493,8 @@ class ImplicitStart:
         (one ray each while they are that few), from the reference and with the final fit's
         smoothness. A fold's rays are rejected when that fit misses their normals by more than
         :data:`CV_DEG`, or by more than :data:`CV_HULL_DEG` where a fit without it
-        extrapolates (:meth:`_on_hull`), and an inner ray missed far beyond every other
+        extrapolates (:meth:`_on_hull`; a corner of the hull of the hits the first pass keeps,
+        and of the pass's), and an inner ray missed far beyond every other
         (:meth:`_lone_miss`), or, seen all around, beyond the others' spread
         (:meth:`_spread_miss`). At most :data:`CV_SHARE` of the kept rays per pass,
         the worst missed first; a pass that rejects none ends them. Returns whether any ray
@@ -1501,6 +1502,7 @@ class ImplicitStart:
         """
         rejected = False
         reference = start
+        bounds = None  # the corners of the hull of the hits the first pass keeps
         for index in range(CV_PASSES):
             base = self.excluded.copy()
             kept = np.flatnonzero(~base)
@@ -1511,7 +1513,12 @@ class ImplicitStart:
                       f"grid {resolution})")
             reference = self._ladder([resolution], [], [], quiet=True, start=reference)
             self._anchor(reference)  # the hits the hull is taken of
-            inner = ~self._on_hull(kept)
+            corners = self._on_hull(kept)
+            if bounds is None:
+                bounds = corners
+            # a ray that bounds the hits only since those beyond it were rejected keeps the
+            # inner limit: a rejected ray may come back, and its region is the data's
+            inner = ~(corners & bounds)
             order = np.random.default_rng(index).permutation(kept)
             miss = np.full(self.m, 180.0)
             for fold in range(folds):
