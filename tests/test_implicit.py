@@ -472,13 +472,18 @@ def test_a_true_normal_at_a_corner_of_the_hits_hull_is_kept_by_cross_validation(
     assert 1 not in {r["index"] for r in result.rejected}
 
 
-def _corners(xy: np.ndarray) -> np.ndarray:
-    """``ImplicitStart._on_hull`` of every ray, their hits at ``xy`` in the plane z = 0."""
+def _seen_from_one_side(xy: np.ndarray) -> ImplicitStart:
+    """A start seen from one side (the plane z = 0) whose rays cross it at ``xy``, no fit."""
     start = ImplicitStart.__new__(ImplicitStart)
     start.m, start._one_side, start.plane = len(xy), True, (np.zeros(3), np.array([0, 0, 1.0]))
     start.kind = wp.array(np.full(len(xy), K.ANCHOR_CROSSING, dtype=np.int32), dtype=int)
     start.anchor = wp.array(np.c_[xy, np.zeros(len(xy))].astype(np.float32), dtype=wp.vec3)
-    return start._on_hull(np.arange(len(xy)))
+    return start
+
+
+def _corners(xy: np.ndarray) -> np.ndarray:
+    """``ImplicitStart._on_hull`` of every ray, their hits at ``xy`` in the plane z = 0."""
+    return _seen_from_one_side(xy)._on_hull(np.arange(len(xy)))
 
 
 def test_a_hull_corner_counts_unless_a_hit_is_nearer_than_the_hits_median_spacing():
@@ -527,11 +532,8 @@ def test_a_ray_that_bounds_the_hits_only_once_others_are_rejected_keeps_the_inne
     xy = np.concatenate([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.95, 0.5]],
                          rng.uniform(0.1, 0.8, (35, 2))])
     miss = np.concatenate([[2.0, 20.0, 20.0, 2.0, 12.0], rng.uniform(1.0, 3.0, 35)])
-    start = ImplicitStart.__new__(ImplicitStart)
-    start.m, start._one_side, start._around = len(xy), True, False
-    start.plane, start.progress = (np.zeros(3), np.array([0, 0, 1.0])), None
-    start.kind = wp.array(np.full(len(xy), K.ANCHOR_CROSSING, dtype=np.int32), dtype=int)
-    start.anchor = wp.array(np.c_[xy, np.zeros(len(xy))].astype(np.float32), dtype=wp.vec3)
+    start = _seen_from_one_side(xy)
+    start._around, start.progress = False, None
     start.excluded = np.zeros(len(xy), dtype=bool)
     start._ladder = lambda *args, **kwargs: None
     start._anchor = lambda level: None
