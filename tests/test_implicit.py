@@ -1332,11 +1332,15 @@ def test_points_scattered_by_half_a_voxel_let_the_quadric_follow_the_normals(nam
         assert distance.mean() < 0.15 * result.grid.spacing
 
 
-def test_exact_points_keep_the_quadric_that_holds_them():
+@pytest.mark.parametrize("noise", [1.0, 2.0])
+def test_exact_points_keep_the_quadric_that_holds_them(noise):
     """With exact points and a pixel of noise on the highlights, the refit that weighs the
     points as noisy meets the normals about as well (0.23 degrees against 0.26 on the sphere),
-    and the quadric that holds the points exactly stays the start: they fix its depth."""
-    scene = make_scene("sphere-around", seed=0, noise=1.0).scene()
+    and the quadric that holds the points exactly stays the start: they fix its depth. With
+    two pixels the refit, bent to the noise, left the points a voxel off, far enough for the
+    points to look noisy (NOISY_POINT_RATIO), and the sphere came out 0.96 h from the truth;
+    its rays' pixel misses are 0.88 times the held fit's, not NOISY_REFIT_GAIN's 0.8."""
+    scene = make_scene("sphere-around", seed=0, noise=noise).scene()
     grid = Grid.from_bounds(*scene.bounds(), resolution=64)
     fit = ImplicitStart(scene, grid, wp.get_device("cpu"), initial_plane(scene, grid))
     assert fit.run(wp.zeros(grid.shape, dtype=float, device="cpu")).shape == "quadric"
