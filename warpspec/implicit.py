@@ -1737,9 +1737,17 @@ class ImplicitStart:
         if was_start and (
                 not self._points_noisier(shape.distance(points), float(np.median(pixel)),
                                          misses, NOISY_POINT_RATIO)
-                or np.median(misses) > NOISY_REFIT_GAIN * np.median(E.pixel_misses(held, *rays))):
+                or not self._refit_closer(misses, E.pixel_misses(held, *rays))):
             return fit
         return refit
+
+    @staticmethod
+    def _refit_closer(refit: np.ndarray, held: np.ndarray) -> bool:
+        """Whether a refit meets the rays NOISY_REFIT_GAIN times closer than the held shape.
+
+        ``refit``, ``held``: the rays' pixel misses by each (their medians are compared).
+        """
+        return bool(np.median(refit) <= NOISY_REFIT_GAIN * np.median(held))
 
     def _points_noisier(self, distance: np.ndarray, pixel: float, misses: np.ndarray,
                         ratio: float) -> bool:
@@ -2007,8 +2015,7 @@ class ImplicitStart:
         loose = T.refit_torus(shape, *rays, points, voxel=self.grid.spacing)
         if loose is None:
             return accepted
-        if accepted is not None and np.median(T.pixel_misses(loose, *rays)) > \
-                NOISY_REFIT_GAIN * np.median(misses):
+        if accepted is not None and not self._refit_closer(T.pixel_misses(loose, *rays), misses):
             return accepted
         prior = self._best
         if (refit := self._accept(loose)) is not None:
