@@ -1733,12 +1733,12 @@ class ImplicitStart:
         refit = (quad, Q.robust_weights(residual, inside, limit_deg=Q.FINAL_LIMIT_DEG), residual)
         if not inside.any() or self._quadric_met(inside, refit) is None:
             return fit
-        misses = E.pixel_misses(shape, *rays)
-        if was_start and (
-                not self._points_noisier(shape.distance(points), float(np.median(pixel)),
+        if was_start:
+            misses = E.pixel_misses(shape, *rays)
+            if (not self._points_noisier(shape.distance(points), float(np.median(pixel)),
                                          misses, NOISY_POINT_RATIO)
-                or not self._refit_closer(misses, E.pixel_misses(held, *rays))):
-            return fit
+                    or not self._refit_closer(misses, E.pixel_misses(held, *rays))):
+                return fit
         return refit
 
     @staticmethod
