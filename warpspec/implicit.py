@@ -75,8 +75,8 @@ are further off; a shape that is not a quadric falls away gradually),..."""
 PIXEL_NOISE = 5.0
 """...(a normal missed by more than QUADRIC_DEG still counts as met when its highlight need
 move no more than PIXEL_MET pixels for the shape to meet it, or, when no shape is the start
-so, no more than this many: noise on the highlights, which moves a grazing ray far along the
-surface),..."""
+so, no more than this many, or more where the shape's rays show more noise (NOISE_SPREAD): noise
+on the highlights, which moves a grazing ray far along the surface),..."""
 PIXEL_STEP = 0.5
 """The move of a highlight (pixels) over which the change of a ray's miss is measured."""
 QUADRIC_POINT_SIZE = 2.0 / 64.0
@@ -119,6 +119,27 @@ dented the surface (the pebble at 2 px, seed 3: 0.05 -> 0.13 h). Over 1,073 cata
 with 1 px, and points half a voxel or a voxel off; the blob, the free-form patch and the
 point-lit dome, seeds 6-59) no other start changed; wrong shapes lie far off in pixels (the
 blob's quadric 12-17 px in the median, the free-form patch's 130-560)."""
+NOISE_SPREAD = 3.5
+"""Judged the second time (PIXEL_NOISE), a shape's allowance is this many times the noise its
+own rays show (:func:`_noise_allowance`), at least PIXEL_NOISE and at most PIXEL_WIDEST (a
+surface of revolution keeps PIXEL_NOISE). Under Gaussian noise of sigma pixels per axis on the
+highlights, the true shape's pixel misses follow Rayleigh's law (median 1.18 sigma; one in 460
+beyond 3.5 sigma). At 2 px, 5 px fixed refused true tori for 3-5 rays in 46-58 (more than
+QUADRIC_AMBIGUOUS) whose highlights lay 5.0-6.7 px off: the torus by flash seeds 2, 3, 700,
+801 and 803, under lamps seeds 3 and 700, under a point lamp seeds 702 and 801 (their medians
+2.0-3.1 px); the grid fits in their place came out 0.12-0.17 h off, under the point lamp 0.55
+and 0.42 (in 170 s), and with the tori as the start 0.05-0.12 h (in 5-12 s)."""
+PIXEL_WIDEST = 8.0
+"""...: noise of up to 2.3 px. A wrong shape misses its rays by tens of pixels in the median
+(the blob's quadric 11-19, the point-lit dome's 3-22), and it meets few more of them with 8 px
+than with 5: over 260 catalogue scenes (every class, seeds 0-2: clean, a quarter false, 1 and
+2 px, a tenth false with 1 px; seeds 3-5 at 2 px; the tori also at 1.5 px, a tenth false with
+2 px, and seeds 700-702 and 801-803 at 2 px; the blob, the free-form patch, the point-lit dome
+and the bottle, seeds 3 and 4, a tenth false with 2 px) no shape refused with 5 px but the true
+tori above and two surfaces of revolution would be taken with 8. Those two are the bottle under
+lamps at 2 px, seeds 3 and 4, whose refits (while each meets more normals: LIT_REFITS) stop at
+the first taken: at seed 4 a first fit that met 84% of the normals within 3 degrees where its
+refit met 95% (1.01 h; the grid fit 0.53), at seed 3 a good one (0.23 h; the grid fit 0.90)."""
 NOISY_POINT_GAIN = 0.5
 """The quadric is refitted with the points weighed as noisy
 (:data:`~warpspec.quadric.NOISY_POINT_WEIGHT`, not POINT_WEIGHT's near-exact hold), and the
@@ -471,6 +492,18 @@ def _suffices(met: np.ndarray, residual: np.ndarray) -> bool:
     """
     ambiguous = ~met & (residual <= REJECT_DEG)
     return bool(np.mean(met) >= QUADRIC_SHARE and np.mean(ambiguous) <= QUADRIC_AMBIGUOUS)
+
+
+def _noise_allowance(pixels: np.ndarray) -> float:
+    """The pixels a shape judged the second time may need its highlights moved (NOISE_SPREAD).
+
+    ``pixels``: the judged rays' pixel misses (infinite where no move meets the normal). The
+    noise's sigma is estimated from their median (Rayleigh's, ``sigma sqrt(2 ln 2)``); false
+    highlights raise it only as they raise the median.
+    """
+    median = float(np.median(pixels)) if len(pixels) else 0.0
+    sigma = median / math.sqrt(2.0 * math.log(2.0))
+    return float(np.clip(NOISE_SPREAD * sigma, PIXEL_NOISE, PIXEL_WIDEST))
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:
@@ -1844,7 +1877,9 @@ class ImplicitStart:
         QUADRIC_AMBIGUOUS missed by at most REJECT_DEG: far off, not a gradual falling away).
         A normal is met within noise when it is missed by at most QUADRIC_DEG or, failing
         that for the shape, when its highlight need move at most the allowance (PIXEL_MET,
-        then PIXEL_NOISE: :meth:`run`) for the shape to meet it (:meth:`_pixel_miss`). The
+        then, judged again (:meth:`run`), NOISE_SPREAD times the noise its rays show, from
+        PIXEL_NOISE to PIXEL_WIDEST: :func:`_noise_allowance`; PIXEL_NOISE for a surface of
+        revolution) for the shape to meet it (:meth:`_pixel_miss`). The
         rays met are those missed by at most QUADRIC_DEG, and, when the shape needed the pixel
         misses, those within PIXEL_MET.
         """
@@ -1856,7 +1891,10 @@ class ImplicitStart:
             return met
         pixels = self._pixel_miss(shape, inside)
         self._noisier |= bool(np.any((pixels > PIXEL_MET) & (pixels <= PIXEL_NOISE)))
-        if not _suffices((met | (pixels <= self._allowance))[inside], judged):
+        allowance = self._allowance
+        if allowance > PIXEL_MET and not isinstance(shape, R.SurfaceOfRevolution):
+            allowance = _noise_allowance(pixels[inside])
+        if not _suffices((met | (pixels <= allowance))[inside], judged):
             return None
         return inside & (met | (pixels <= PIXEL_MET))
 
