@@ -128,7 +128,8 @@ beyond 3.5 sigma). At 2 px, 5 px fixed refused true tori for 3-5 rays in 46-58 (
 QUADRIC_AMBIGUOUS) whose highlights lay 5.0-6.7 px off: the torus by flash seeds 2, 3, 700,
 801 and 803, under lamps seeds 3 and 700, under a point lamp seeds 702 and 801 (their medians
 2.0-3.1 px); the grid fits in their place came out 0.12-0.17 h off, under the point lamp 0.55
-and 0.42 (in 170 s), and with the tori as the start 0.05-0.12 h (in 5-12 s)."""
+and 0.42 (in 217-233 s), and with the tori as the start 0.05-0.12 h (in 3-9 s; two runs at a
+time)."""
 PIXEL_WIDEST = 8.0
 """...: noise of up to 2.3 px. A wrong shape misses its rays by tens of pixels in the median
 (the blob's quadric 11-19, the point-lit dome's 3-22), and it meets few more of them with 8 px
