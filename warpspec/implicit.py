@@ -120,13 +120,14 @@ with 1 px, and points half a voxel or a voxel off; the blob, the free-form patch
 point-lit dome, seeds 6-59) no other start changed; wrong shapes lie far off in pixels (the
 blob's quadric 12-17 px in the median, the free-form patch's 130-560)."""
 NOISE_SPREAD = 3.5
-"""Judged the second time (PIXEL_NOISE), a shape's allowance is this many times the noise its
-own rays show (:func:`_noise_allowance`), at least PIXEL_NOISE and at most PIXEL_WIDEST (a
-surface of revolution keeps PIXEL_NOISE). Under Gaussian noise of sigma pixels per axis on the
-highlights, the true shape's pixel misses follow Rayleigh's law (median 1.18 sigma; one in 460
-beyond 3.5 sigma). At 2 px, 5 px fixed refused true tori for 3-5 rays in 46-58 (more than
-QUADRIC_AMBIGUOUS) whose highlights lay 5.0-6.7 px off: the torus by flash seeds 2, 3, 700,
-801 and 803, under lamps seeds 3 and 700, under a point lamp seeds 702 and 801 (their medians
+"""Judged the second time (PIXEL_NOISE), a shape's allowance is this many times the noise its own
+rays show (:func:`_noise_allowance`), at least PIXEL_NOISE and at most PIXEL_WIDEST (a surface
+of revolution keeps PIXEL_NOISE as it is fitted:
+:meth:`ImplicitStart._best_revolution_by_noise`). Under Gaussian noise of sigma pixels per axis
+on the highlights, the true shape's pixel misses follow Rayleigh's law (median 1.18 sigma; one
+in 460 beyond 3.5 sigma). At 2 px, 5 px fixed refused true tori for 3-5 rays in 46-58 (more than
+QUADRIC_AMBIGUOUS) whose highlights lay 5.0-6.7 px off: the torus by flash seeds 2, 3, 700, 801
+and 803, under lamps seeds 3 and 700, under a point lamp seeds 702 and 801 (their medians
 2.0-3.1 px); the grid fits in their place came out 0.12-0.17 h off, under the point lamp 0.55
 and 0.42 (in 217-233 s), and with the tori as the start 0.05-0.12 h (in 3-9 s; two runs at a
 time)."""
@@ -1885,7 +1886,7 @@ class ImplicitStart:
         that for the shape, when its highlight need move at most the allowance (PIXEL_MET,
         then, judged again (:meth:`run`), NOISE_SPREAD times the noise its rays show, from
         PIXEL_NOISE to PIXEL_WIDEST: :func:`_noise_allowance`; PIXEL_NOISE for a surface of
-        revolution) for the shape to meet it (:meth:`_pixel_miss`). The
+        revolution as it is fitted) for the shape to meet it (:meth:`_pixel_miss`). The
         rays met are those missed by at most QUADRIC_DEG, and, when the shape needed the pixel
         misses, those within PIXEL_MET.
         """
