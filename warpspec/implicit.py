@@ -1899,8 +1899,8 @@ class ImplicitStart:
         pixels = self._pixel_miss(shape, inside)
         self._noisier |= bool(np.any((pixels > PIXEL_MET) & (pixels <= PIXEL_NOISE)))
         allowance = self._allowance
-        if allowance > PIXEL_MET and (self._by_noise
-                                      or not isinstance(shape, R.SurfaceOfRevolution)):
+        if allowance > PIXEL_MET and (not isinstance(shape, R.SurfaceOfRevolution)
+                                      or self._by_noise):
             allowance = _noise_allowance(pixels[inside])
         if not _suffices((met | (pixels <= allowance))[inside], judged):
             return None
