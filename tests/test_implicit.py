@@ -1359,7 +1359,7 @@ def test_a_closed_form_shape_holds_the_points_in_its_median_and_four_in_five_nea
     stub._holds_points = lambda distance: ImplicitStart._holds_points(stub, distance)
     pixels = np.full(20, np.inf)  # no move of a highlight meets its normal
     stub._pixel_miss = lambda shape, rays: pixels
-    stub._allowance, stub._noisier, stub._by_noise = PIXEL_NOISE, False, False
+    stub._allowance, stub._noisier = PIXEL_NOISE, False
     rays = np.ones(20, dtype=bool)
     residual = np.zeros(20)  # every normal met
     near = np.full(6, 0.019)  # within two voxels: 0.02 = 2 * 0.64 / 64

@@ -986,8 +986,6 @@ class ImplicitStart:
         the ray count as met (PIXEL_MET, then PIXEL_NOISE when no shape was the start)."""
         self._noisier = False
         """Whether some ray would be met within PIXEL_NOISE pixels but not PIXEL_MET."""
-        self._by_noise = False
-        """Whether a surface of revolution is judged by the noise its rays show."""
 
     def run(self, out: wp.array) -> FitReport:
         """Fit, and write the fitted function (not yet a signed distance) into ``out``."""
@@ -1868,7 +1866,8 @@ class ImplicitStart:
         self.weights = np.where((self.weights > 0.0) | met, 1.0, 0.0)
 
     def _start_met(self, shape, residual: np.ndarray, inside: np.ndarray,
-                   point_distance: np.ndarray) -> np.ndarray | None:
+                   point_distance: np.ndarray, *, by_noise: bool = False
+                   ) -> np.ndarray | None:
         """The rays a closed-form shape meets if it is the start by itself, else ``None``.
 
         The shape is a quadric, a torus or a surface of revolution.
@@ -1878,6 +1877,7 @@ class ImplicitStart:
             residual: Its normal misses (degrees), one per ray.
             inside: The rays that meet the domain (those judged).
             point_distance: The points' distances from it (world units).
+            by_noise: Judge a surface of revolution too by the noise its rays show.
 
         It must hold the points (:meth:`_holds_points`), meet most normals within noise
         (QUADRIC_SHARE of them), and the rest must be clearly false (no more than
@@ -1900,7 +1900,7 @@ class ImplicitStart:
         self._noisier |= bool(np.any((pixels > PIXEL_MET) & (pixels <= PIXEL_NOISE)))
         allowance = self._allowance
         if allowance > PIXEL_MET and (not isinstance(shape, R.SurfaceOfRevolution)
-                                      or self._by_noise):
+                                      or by_noise):
             allowance = _noise_allowance(pixels[inside])
         if not _suffices((met | (pixels <= allowance))[inside], judged):
             return None
@@ -2086,12 +2086,8 @@ class ImplicitStart:
         if self._allowance == PIXEL_MET or best is None or \
                 not isinstance(best[1], R.SurfaceOfRevolution):
             return None
-        self._by_noise = True
-        try:
-            accepted = self._accept(best[1])
-        finally:
-            self._by_noise = False
-        self._best = best
+        accepted = self._accept(best[1], by_noise=True)
+        self._best = best  # the prior stays as it was before this judging
         return accepted
 
     def _revolution(self, guess: Guess) -> R.SurfaceOfRevolution | None:
@@ -2467,10 +2463,12 @@ class ImplicitStart:
                 return accepted
         return None
 
-    def _accept(self, shape, hits: np.ndarray | None = None, inside: np.ndarray | None = None):
+    def _accept(self, shape, hits: np.ndarray | None = None, inside: np.ndarray | None = None,
+                *, by_noise: bool = False):
         """``shape`` if it is the start by itself (:meth:`_start_met`), else ``None``.
 
-        ``hits`` and ``inside``: the rays' crossings with it, when already traced. Sets the rays'
+        ``hits`` and ``inside``: the rays' crossings with it, when already traced; ``by_noise``:
+        a surface of revolution too is judged by the noise its rays show. Sets the rays'
         residuals and weights (the rays it misses by more than REJECT_DEG are rejected).
         """
         origins, dirs, _, _ = self._rays
@@ -2485,7 +2483,8 @@ class ImplicitStart:
         share = _met(residual)
         if self._holds_points(distance) and (self._best is None or share > self._best[0]):
             self._best = (share, shape)  # the grid fit's prior, should none be the start
-        if (met := self._start_met(shape, residual, inside, distance)) is None:
+        if (met := self._start_met(shape, residual, inside, distance,
+                                   by_noise=by_noise)) is None:
             return None
         self.residual = residual
         self.weights = (inside & (residual <= REJECT_DEG) | met).astype(float)
